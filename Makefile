@@ -1,0 +1,31 @@
+# Two entry points: `make demo` (set up, train the quickstart curriculum, evaluate it) and
+# `make test` (set up, run the test suite). Both create .venv on first use.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+RUN_DIR := runs/quickstart
+
+.PHONY: setup demo test bench clean
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	# CPU torch first, so no dependency can pull a multi-GB CUDA build.
+	$(PY) -m pip install --quiet torch==2.13.0
+	$(PY) -m pip install --quiet -e '.[dev]'
+	touch $@
+
+setup: $(VENV)/.installed
+
+demo: setup
+	$(PY) train.py --config configs/quickstart.yaml --run-dir $(RUN_DIR) --overwrite
+	$(PY) evaluate.py $(RUN_DIR) --episodes 20 --official --json $(RUN_DIR)/evaluation.json --plots $(RUN_DIR)/plots --video $(RUN_DIR)/episodes.mp4
+
+test: setup
+	$(PY) -m pytest -q
+
+bench: setup
+	$(PY) benchmarks/env_speed.py
+
+clean:
+	rm -rf $(VENV) runs

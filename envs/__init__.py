@@ -1,0 +1,17 @@
+"""MyoChallenge tasks on the ``mujoco`` bindings; importing registers the gymnasium ids."""
+
+from gymnasium.envs.registration import register, registry
+
+from envs.baoding import BaodingEnv, BaodingTask
+
+__all__ = ["BaodingEnv", "BaodingTask"]
+
+_IDS = {
+    "myosds/BaodingP1-v0": ("envs.baoding:BaodingEnv", {"preset": "p1"}),
+    "myosds/BaodingP2-v0": ("envs.baoding:BaodingEnv", {"preset": "p2"}),
+    "myosds/Baoding-v0": ("envs.baoding:BaodingEnv", {}),
+}
+for _id, (_entry, _kwargs) in _IDS.items():
+    if _id not in registry:
+        # The env truncates at its own horizon, so no TimeLimit wrapper is added.
+        register(id=_id, entry_point=_entry, kwargs=_kwargs)

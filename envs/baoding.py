@@ -1,0 +1,503 @@
+"""MyoChallenge 2022 Baoding balls on the ``mujoco`` bindings, with every SDS curriculum knob.
+
+Physics, observation, reward, termination and scoring reproduce myosuite's
+``myoChallengeBaodingP1-v1`` / ``P2-v1`` (tests/test_baoding_parity.py checks it step by
+step); only the model files are shared with myosuite. Knobs widen or narrow the task
+distribution for the static-to-dynamic stabilization curriculum.
+
+Random draws at reset, in this order (the presets draw exactly what the official env draws,
+so the same seed gives the same task instance there and here):
+  1. direction, if ``direction == "random"`` (one of hold, cw, ccw);
+  2. start angle, if ``start_angle == "uniform"`` (U(0, 2 pi));
+  3. start offset, if ``start_offset`` is set;
+  4. x radius, y radius (always, even when fixed), period (unless static);
+  5. ball mass x2, friction x2, size x2 (each only when its knob is set);
+  6. palm noise (3 wrist joints), finger noise (20 joints), each only when > 0;
+  7. whether to start on the targets, only when 0 < ``rsi_probability`` < 1.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from envs.assets import load_hand_model
+from envs.metrics import EpisodeResult
+from envs.knobs import (
+    Range,
+    check_known,
+    parse_choice,
+    parse_probability,
+    parse_range,
+    parse_vector_range,
+    parse_weights,
+    to_float,
+)
+
+MODEL_FILE = "myohand_baoding.xml"
+HORIZON = 200  # control steps of 25 ms: a 5 s episode
+FRAME_SKIP = 10
+DIRECTIONS = ("hold", "cw", "ccw")
+_DIRECTION_SIGN = {"hold": 0, "cw": -1, "ccw": 1}
+OFFICIAL_START_ANGLE = math.pi / 4  # myosuite 3.0.0; ball 2 starts pi behind
+# The 2022 envs' start angle: each target then sits within the solved radius of its ball.
+ON_BALLS_START_ANGLE = 3 * math.pi / 4
+ORBIT_CENTER = (-0.0125, -0.07)  # m, in the frame of the palm body carrying the target sites
+NOMINAL_FRICTION = (1.0, 0.005, 0.0001)
+REWARD_TERMS = ("pos_dist_1", "pos_dist_2", "act_reg", "solved", "alive", "done", "sparse")
+N_HAND_JOINTS = 23
+N_WRIST_JOINTS = 3  # pro_sup, deviation, flexion; the other 20 hand joints are fingers
+
+
+@dataclass(frozen=True)
+class BaodingTask:
+    """One task instance: everything that is drawn at reset and fixed for the episode.
+
+    ``period`` is the time of one revolution of the targets in seconds (``math.inf``:
+    the targets never move). Sizes are ball radii (m), masses kg, frictions MuJoCo's
+    (sliding, torsional, rolling) coefficients.
+    """
+
+    direction: str
+    period: float
+    x_radius: float
+    y_radius: float
+    start_angle: float
+    ball_size: tuple[float, float]
+    ball_mass: tuple[float, float]
+    ball_friction: tuple[tuple[float, float, float], tuple[float, float, float]]
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any]) -> "BaodingTask":
+        """Build and check a task from a mapping with exactly this class's fields."""
+        names = [f for f in cls.__dataclass_fields__]
+        check_known("task field", values, names)
+        missing = [n for n in names if n not in values]
+        if missing:
+            raise ValueError(f"task: missing field(s) {', '.join(missing)}")
+        period = values["period"]
+        period = math.inf if period in ("static", math.inf) else to_float("task.period", period)
+        if period <= 0:
+            raise ValueError(f"task.period: must be > 0 or 'static', got {period}")
+        pair = lambda key: tuple(to_float(f"task.{key}[{i}]", v) for i, v in enumerate(values[key]))  # noqa: E731
+        friction = tuple(
+            tuple(to_float(f"task.ball_friction[{i}][{j}]", v) for j, v in enumerate(row))
+            for i, row in enumerate(values["ball_friction"]))
+        task = cls(
+            direction=parse_choice("task.direction", values["direction"], DIRECTIONS),
+            period=period,
+            x_radius=to_float("task.x_radius", values["x_radius"]),
+            y_radius=to_float("task.y_radius", values["y_radius"]),
+            start_angle=to_float("task.start_angle", values["start_angle"]),
+            ball_size=pair("ball_size"), ball_mass=pair("ball_mass"), ball_friction=friction)
+        if len(task.ball_size) != 2 or len(task.ball_mass) != 2 or len(friction) != 2 or any(
+                len(row) != 3 for row in friction):
+            raise ValueError("task: ball_size and ball_mass take 2 values, ball_friction 2 x 3")
+        return task
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly fields (a static period is written ``"static"``)."""
+        values = asdict(self)
+        if math.isinf(self.period):
+            values["period"] = "static"
+        return values
+
+
+@dataclass(frozen=True)
+class BaodingKnobs:
+    """The task distribution and episode rules; see :data:`KNOB_HELP` for each field."""
+
+    direction: str = "ccw"
+    period: Range | None = Range(5.0, 5.0)  # None: static targets
+    x_radius: Range = Range(0.025, 0.025)
+    y_radius: Range = Range(0.028, 0.028)
+    start_angle: str | float = "fixed"
+    start_offset: Range | None = None
+    rsi_probability: float = 0.0
+    ball_size: Range | None = None
+    ball_mass: Range | None = None
+    ball_friction: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    finger_noise: float = 0.0
+    palm_noise: float = 0.0
+    drop_height: float = 1.25
+    solved_radius: float = 0.015
+    reward_weights: Mapping[str, float] = field(
+        default_factory=lambda: {"pos_dist_1": 5.0, "pos_dist_2": 5.0})
+
+
+KNOB_HELP = {
+    "direction": "hold | cw | ccw | random (uniform over the three, as in P2)",
+    "period": "seconds per revolution of the targets: a value, [min, max], or 'static'",
+    "x_radius": "m, ellipse half-axis along the palm's x: a value or [min, max]",
+    "y_radius": "m, ellipse half-axis along the palm's y: a value or [min, max]",
+    "start_angle": "'fixed' (official pi/4), 'on_balls' (3pi/4), 'uniform', or radians",
+    "start_offset": "rad added to the start angle: a value or [min, max]",
+    "rsi_probability": "probability the balls start exactly on their targets (RSI)",
+    "ball_size": "m, ball radius: null (model's 0.022), a value, or [min, max]",
+    "ball_mass": "kg: null (model's 0.043), a value, or [min, max]",
+    "ball_friction": "null (model's), [slide, torsion, roll], or [[3 lows], [3 highs]]",
+    "finger_noise": "rad, uniform +- noise on the 20 finger joints at reset",
+    "palm_noise": "rad, uniform +- noise on the 3 wrist joints at reset",
+    "drop_height": "m, a ball below this height is dropped and ends the episode",
+    "solved_radius": "m, both balls within this distance of their targets = solved",
+    "reward_weights": f"mapping term -> weight over {', '.join(REWARD_TERMS)}",
+}
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "p1": {},
+    "p2": {
+        "direction": "random",
+        "period": [4.0, 6.0],
+        "x_radius": [0.020, 0.030],
+        "y_radius": [0.022, 0.032],
+        "start_angle": "uniform",
+        "ball_size": [0.018, 0.024],
+        "ball_mass": [0.030, 0.300],
+        "ball_friction": [[n - c for n, c in zip(NOMINAL_FRICTION, (0.2, 0.001, 0.00002))],
+                          [n + c for n, c in zip(NOMINAL_FRICTION, (0.2, 0.001, 0.00002))]],
+    },
+}
+
+
+def parse_knobs(preset: str = "p1", **knobs: Any) -> BaodingKnobs:
+    """Validated knobs: a preset's values with ``knobs`` overriding them.
+
+    Raises:
+        ValueError: naming an unknown preset or knob (with the allowed ones), or a bad value.
+    """
+    parse_choice("preset", preset, PRESETS)
+    check_known("Baoding knob", knobs, KNOB_HELP)
+    raw = {**PRESETS[preset], **knobs}
+    out: dict[str, Any] = {}
+    optional_range = lambda key, **kw: None if raw[key] is None else parse_range(key, raw[key], **kw)  # noqa: E731
+    if "direction" in raw:
+        out["direction"] = parse_choice("direction", raw["direction"], (*DIRECTIONS, "random"))
+    if "period" in raw:
+        out["period"] = None if raw["period"] == "static" else parse_range(
+            "period", raw["period"], positive=True)
+    for key in ("x_radius", "y_radius"):
+        if key in raw:
+            out[key] = parse_range(key, raw[key], positive=True)
+    if "start_angle" in raw:
+        angle = raw["start_angle"]
+        out["start_angle"] = angle if angle in ("fixed", "on_balls", "uniform") else to_float(
+            "start_angle (or one of fixed, on_balls, uniform)", angle)
+    if "start_offset" in raw:
+        out["start_offset"] = optional_range("start_offset")
+    if "rsi_probability" in raw:
+        out["rsi_probability"] = parse_probability("rsi_probability", raw["rsi_probability"])
+    for key in ("ball_size", "ball_mass"):
+        if key in raw:
+            out[key] = optional_range(key, positive=True)
+    if "ball_friction" in raw:
+        if raw["ball_friction"] is None:
+            out["ball_friction"] = None
+        else:
+            low, high = parse_vector_range("ball_friction", raw["ball_friction"], 3)
+            if np.any(low < 0):
+                raise ValueError(f"ball_friction: coefficients must be >= 0, got {low.tolist()}")
+            out["ball_friction"] = (tuple(low.tolist()), tuple(high.tolist()))
+    for key in ("finger_noise", "palm_noise"):
+        if key in raw:
+            out[key] = parse_range(key, raw[key], minimum=0.0).low
+    if "drop_height" in raw:
+        out["drop_height"] = to_float("drop_height", raw["drop_height"])
+    if "solved_radius" in raw:
+        out["solved_radius"] = parse_range("solved_radius", raw["solved_radius"], positive=True).low
+    if "reward_weights" in raw:
+        out["reward_weights"] = parse_weights("reward_weights", raw["reward_weights"], REWARD_TERMS)
+    return replace(BaodingKnobs(), **out)
+
+
+class BaodingEnv(gym.Env):
+    """Rotate two balls around each other in the palm of the 39-muscle MyoHand.
+
+    Args:
+        preset: ``"p1"`` or ``"p2"``, the official phase's task distribution.
+        render_mode: ``None`` or ``"rgb_array"``.
+        horizon: control steps before truncation (official: 200).
+        **knobs: overrides of the preset; see :data:`KNOB_HELP`.
+
+    Observation (86, float32): hand joint angles (23), ball 1 position (3) and velocity
+    times dt (3), ball 2 likewise, target 1 and 2 positions (3 each), target minus ball
+    for each ball (3 each), muscle activations (39). Action: 39 values in [-1, 1], mapped
+    to muscle excitation by ``1 / (1 + exp(-5 (a - 0.5)))``.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 40}
+
+    def __init__(self, preset: str = "p1", render_mode: str | None = None,
+                 horizon: int = HORIZON, **knobs: Any) -> None:
+        super().__init__()
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode: {render_mode!r} is not one of None, 'rgb_array'")
+        self.render_mode = render_mode
+        self.horizon = int(horizon)
+        self.model, self._spec = load_hand_model(MODEL_FILE)
+        self.data = mujoco.MjData(self.model)
+        self._scratch = mujoco.MjData(self.model)  # for mj_setConst after ball edits
+        self.dt = self.model.opt.timestep * FRAME_SKIP
+        model = self.model
+        self._ball_bodies = (model.body("ball1").id, model.body("ball2").id)
+        self._ball_geoms = (model.geom("ball1").id, model.geom("ball2").id)
+        self._ball_sites = (model.site("ball1_site").id, model.site("ball2_site").id)
+        self._target_sites = (model.site("target1_site").id, model.site("target2_site").id)
+        self._nominal_size = float(model.geom_size[self._ball_geoms[0], 0])
+        self._nominal_mass = float(model.body_mass[self._ball_bodies[0]])
+        self._nominal_friction = tuple(float(v) for v in model.geom_friction[self._ball_geoms[0]])
+        self._ball_qpos = [model.jnt_qposadr[model.body_jntadr[b]] for b in self._ball_bodies]
+        self._ball_dof = [model.jnt_dofadr[model.body_jntadr[b]] for b in self._ball_bodies]
+        self._joint_low = model.jnt_range[:N_HAND_JOINTS, 0].copy()
+        self._joint_high = model.jnt_range[:N_HAND_JOINTS, 1].copy()
+        self._init_qpos = model.qpos0.copy()
+        self._init_qpos[:N_HAND_JOINTS] = 0.0
+        self._init_qpos[0] = -1.57  # palm up, as the official env
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (model.nu,), np.float32)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (86,), np.float32)
+        self._obs = np.zeros(86)
+        self.knobs = parse_knobs(preset, **knobs)
+        self.preset = preset
+        self.task: BaodingTask | None = None
+        self._counter = 0
+        self._renderer: mujoco.Renderer | None = None
+
+    # -- distribution -------------------------------------------------------------------
+
+    def configure(self, preset: str | None = None, **knobs: Any) -> None:
+        """Replace the task distribution (takes effect at the next reset).
+
+        The result depends only on the arguments (the preset, default the current one,
+        with ``knobs`` over it), so a curriculum can re-send a stage after a restart.
+        """
+        preset = self.preset if preset is None else preset
+        self.knobs = parse_knobs(preset, **knobs)
+        self.preset = preset
+
+    def sample_task(self, rng: np.random.Generator) -> BaodingTask:
+        """Draw a task instance from the current knobs (draw order: module docstring)."""
+        k = self.knobs
+        direction = DIRECTIONS[int(rng.choice(3))] if k.direction == "random" else k.direction
+        if k.start_angle == "uniform":
+            start = float(rng.uniform(low=0, high=2 * np.pi))
+        elif k.start_angle == "fixed":
+            start = OFFICIAL_START_ANGLE
+        elif k.start_angle == "on_balls":
+            start = ON_BALLS_START_ANGLE
+        else:
+            start = float(k.start_angle)
+        if k.start_offset is not None:
+            start += k.start_offset.sample(rng)
+        x_radius, y_radius = k.x_radius.sample(rng), k.y_radius.sample(rng)
+        period = math.inf if k.period is None else k.period.sample(rng)
+        mass = tuple(k.ball_mass.sample(rng) for _ in range(2)) if k.ball_mass else (
+            self._nominal_mass,) * 2
+        if k.ball_friction:
+            low, high = k.ball_friction
+            friction = tuple(tuple(float(v) for v in rng.uniform(low=low, high=high)) for _ in range(2))
+        else:
+            friction = (self._nominal_friction,) * 2
+        size = tuple(k.ball_size.sample(rng) for _ in range(2)) if k.ball_size else (
+            self._nominal_size,) * 2
+        return BaodingTask(direction, period, x_radius, y_radius, start, size, mass, friction)
+
+    # -- gymnasium API ------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode.
+
+        Options:
+            task: a :class:`BaodingTask` or a mapping of its fields, pinning the instance.
+            state: mapping with any of ``qpos`` (37), ``qvel`` (35), ``act`` (39), set
+                after the task is applied (no noise or RSI then).
+        """
+        super().reset(seed=seed)
+        options = dict(options or {})
+        check_known("reset option", options, ("task", "state"))
+        model, data, rng = self.model, self.data, self.np_random
+        mujoco.mj_resetData(model, data)
+        data.qpos[:] = self._init_qpos
+        task = options.get("task")
+        if task is None:
+            task = self.sample_task(rng)
+        elif not isinstance(task, BaodingTask):
+            task = BaodingTask.from_mapping(task)
+        self.task = task
+        self._apply_ball_physics(task)
+        self._counter = 0
+        self._place_targets(0)
+        if "state" in options:
+            self._set_state(options["state"])
+        else:
+            self._randomize_start(rng)
+        mujoco.mj_forward(model, data)
+        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "length": 0}
+        obs = self._observe()
+        return obs, {"task": task}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Apply one 25 ms control step.
+
+        Raises:
+            ValueError: if the action has the wrong shape or a NaN/inf value (the
+                simulation is left untouched).
+        """
+        if self.task is None:
+            raise RuntimeError("call reset() before step()")
+        action = np.asarray(action)
+        if action.shape != (self.model.nu,):
+            raise ValueError(f"action: expected shape ({self.model.nu},), got {action.shape}")
+        if not np.isfinite(action).all():
+            raise ValueError("action: contains NaN or inf; the simulation was not stepped")
+        action = np.clip(action, -1.0, 1.0)
+        model, data = self.model, self.data
+        self._place_targets(self._counter)
+        data.ctrl[:] = 1.0 / (1.0 + np.exp(-5.0 * (action - 0.5)))
+        mujoco.mj_step(model, data, FRAME_SKIP)
+        # Sites after mj_step lag the integrated state by one substep: refresh kinematics
+        # only (all the observation needs) instead of a full mj_forward.
+        mujoco.mj_kinematics(model, data)
+        self._counter += 1
+        unstable = any(data.warning[w].number > 0 for w in _INSTABILITY_WARNINGS)
+        obs = self._observe()
+        terms = self._reward_terms()
+        weights = self.knobs.reward_weights
+        reward = float(np.sum([weight * terms[key] for key, weight in weights.items()]))
+        terminated = bool(terms["done"]) or unstable
+        truncated = not terminated and self._counter >= self.horizon
+        episode = self._episode
+        episode["length"] += 1
+        episode["solved_steps"] += int(terms["solved"])
+        episode["effort_sum"] -= terms["act_reg"]
+        info: dict[str, Any] = {**terms, "dropped": bool(terms["done"]), "unstable": unstable,
+                                "task": self.task}
+        if terminated or truncated:
+            info["episode_result"] = EpisodeResult(
+                solved_steps=episode["solved_steps"], length=episode["length"],
+                horizon=self.horizon, dropped=bool(terms["done"]),
+                effort=episode["effort_sum"] / episode["length"], direction=self.task.direction)
+        return obs, reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        """An RGB frame (480 x 640) when ``render_mode == "rgb_array"``."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, 480, 640)
+        mujoco.mj_forward(self.model, self.data)  # tendons drawn to the targets need it
+        self._renderer.update_scene(self.data, camera=-1)
+        return self._renderer.render()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # -- internals ----------------------------------------------------------------------
+
+    def _place_targets(self, counter: int) -> None:
+        """Move the target sites to their point of the trajectory at control step ``counter``."""
+        task = self.task
+        sign = _DIRECTION_SIGN[task.direction]
+        # Same float operations as the official precomputed trajectory.
+        angle = 0.0 if math.isinf(task.period) else sign * 2 * np.pi * (counter * self.dt / task.period)
+        site_pos = self.model.site_pos
+        for site, start in zip(self._target_sites, (task.start_angle, task.start_angle - np.pi)):
+            site_pos[site, 0] = task.x_radius * np.cos(angle + start) + ORBIT_CENTER[0]
+            site_pos[site, 1] = task.y_radius * np.sin(angle + start) + ORBIT_CENTER[1]
+
+    def _apply_ball_physics(self, task: BaodingTask) -> None:
+        """Write the task's ball radius, mass and friction into the model.
+
+        Size and mass edits leave derived fields stale; we recompute them as MuJoCo's
+        compiler does for a sphere (inertia 2/5 m r^2 bounded below by ``boundinertia``,
+        bounding boxes) and rerun ``mj_setConst``, matching a recompiled model.
+        """
+        model = self.model
+        changed = False
+        for i, (body, geom) in enumerate(zip(self._ball_bodies, self._ball_geoms)):
+            model.geom_friction[geom] = task.ball_friction[i]
+            radius, mass = task.ball_size[i], task.ball_mass[i]
+            if model.geom_size[geom, 0] == radius and model.body_mass[body] == mass:
+                continue
+            changed = True
+            model.geom_size[geom] = radius
+            model.body_mass[body] = mass
+            model.body_inertia[body] = max(0.4 * mass * radius**2, self._spec.compiler.boundinertia)
+            model.geom_rbound[geom] = radius
+            model.geom_aabb[geom] = (0, 0, 0, radius, radius, radius)
+            node = model.body_bvhadr[body]
+            model.bvh_aabb[node] = (0, 0, 0, radius, radius, radius)
+        if changed:
+            mujoco.mj_setConst(model, self._scratch)
+
+    def _randomize_start(self, rng: np.random.Generator) -> None:
+        knobs, qpos = self.knobs, self.data.qpos
+        if knobs.palm_noise > 0:
+            qpos[:N_WRIST_JOINTS] += rng.uniform(-knobs.palm_noise, knobs.palm_noise, N_WRIST_JOINTS)
+        if knobs.finger_noise > 0:
+            n = N_HAND_JOINTS - N_WRIST_JOINTS
+            qpos[N_WRIST_JOINTS:N_HAND_JOINTS] += rng.uniform(-knobs.finger_noise, knobs.finger_noise, n)
+        np.clip(qpos[:N_HAND_JOINTS], self._joint_low, self._joint_high, out=qpos[:N_HAND_JOINTS])
+        p = knobs.rsi_probability
+        if p >= 1.0 or (p > 0.0 and rng.uniform() < p):
+            self._balls_onto_targets()
+
+    def _balls_onto_targets(self) -> None:
+        """Reference state initialization: each ball's centre on its target site, at rest."""
+        mujoco.mj_kinematics(self.model, self.data)
+        for qadr, site in zip(self._ball_qpos, self._target_sites):
+            self.data.qpos[qadr:qadr + 3] = self.data.site_xpos[site]
+
+    def _set_state(self, state: Mapping[str, Any]) -> None:
+        check_known("state field", state, ("qpos", "qvel", "act"))
+        data = self.data
+        for key in state:
+            target = getattr(data, key)
+            value = np.asarray(state[key], dtype=float)
+            if value.shape != target.shape:
+                raise ValueError(f"state.{key}: expected shape {target.shape}, got {value.shape}")
+            target[:] = value
+
+    def _observe(self) -> np.ndarray:
+        data, obs = self.data, self._obs
+        (b1, b2), (t1, t2) = self._ball_sites, self._target_sites
+        site_xpos, qvel = data.site_xpos, data.qvel
+        d1, d2 = self._ball_dof
+        obs[0:23] = data.qpos[:N_HAND_JOINTS]
+        obs[23:26] = site_xpos[b1]
+        obs[26:29] = qvel[d1:d1 + 3] * self.dt
+        obs[29:32] = site_xpos[b2]
+        obs[32:35] = qvel[d2:d2 + 3] * self.dt
+        obs[35:38] = site_xpos[t1]
+        obs[38:41] = site_xpos[t2]
+        obs[41:44] = obs[35:38] - obs[23:26]
+        obs[44:47] = obs[38:41] - obs[29:32]
+        obs[47:86] = data.act
+        return obs.astype(np.float32)
+
+    def _reward_terms(self) -> dict[str, float]:
+        obs, knobs = self._obs, self.knobs
+        dist_1 = float(np.linalg.norm(obs[41:44]))
+        dist_2 = float(np.linalg.norm(obs[44:47]))
+        dropped = obs[25] < knobs.drop_height or obs[31] < knobs.drop_height
+        solved = dist_1 < knobs.solved_radius and dist_2 < knobs.solved_radius and not dropped
+        return {
+            "pos_dist_1": -dist_1,
+            "pos_dist_2": -dist_2,
+            "act_reg": -float(np.linalg.norm(obs[47:86])) / self.model.na,
+            "sparse": -(dist_1 + dist_2),
+            "solved": float(solved),
+            "alive": float(not dropped),
+            "done": float(dropped),
+        }
+
+
+_INSTABILITY_WARNINGS = (int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
+                         int(mujoco.mjtWarning.mjWARN_BADQACC))

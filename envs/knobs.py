@@ -1,0 +1,131 @@
+"""Parsing and checking of env knobs: scalars, ranges and choices.
+
+Knob values come from Python callers and from YAML curricula, so every parser takes the
+knob's name and says exactly what is wrong and what is allowed. PyYAML reads ``1e-3`` as a
+string; numbers given as strings are accepted when they parse as floats.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+def to_float(name: str, value: Any) -> float:
+    """A finite float from a number or numeric string, else ``ValueError`` naming the knob."""
+    if isinstance(value, bool):
+        raise ValueError(f"{name}: expected a number, got the boolean {value!r}")
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise ValueError(f"{name}: expected a finite number, got {value!r}")
+    return number
+
+
+@dataclass(frozen=True)
+class Range:
+    """A closed interval sampled uniformly; ``low == high`` is a fixed value."""
+
+    low: float
+    high: float
+
+    def sample(self, rng: np.random.Generator) -> float:
+        """One uniform draw (always consumes one draw, even for a fixed value)."""
+        return float(rng.uniform(low=self.low, high=self.high))
+
+    @property
+    def is_fixed(self) -> bool:
+        return self.low == self.high
+
+    def to_yaml(self) -> float | list[float]:
+        return self.low if self.is_fixed else [self.low, self.high]
+
+
+def parse_range(name: str, value: Any, *, minimum: float | None = None,
+                positive: bool = False) -> Range:
+    """A :class:`Range` from a number (fixed value) or a ``[low, high]`` pair.
+
+    Raises:
+        ValueError: for a non-number, a pair that is not two numbers, an empty or
+            reversed range, or a value below ``minimum`` / not above 0 when ``positive``.
+    """
+    if isinstance(value, Range):
+        low, high = value.low, value.high
+    elif isinstance(value, (list, tuple)):
+        if len(value) != 2:
+            raise ValueError(f"{name}: a range is [low, high], got {list(value)!r}")
+        low, high = to_float(f"{name}[0]", value[0]), to_float(f"{name}[1]", value[1])
+        if low > high:
+            raise ValueError(f"{name}: range [{low}, {high}] is reversed (low > high)")
+    else:
+        low = high = to_float(name, value)
+    if positive and low <= 0:
+        raise ValueError(f"{name}: must be > 0, got {low}")
+    if minimum is not None and low < minimum:
+        raise ValueError(f"{name}: must be >= {minimum}, got {low}")
+    return Range(low, high)
+
+
+def parse_vector_range(name: str, value: Any, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(low, high)`` arrays from a fixed ``size``-vector or a ``[low_vector, high_vector]`` pair."""
+    array = np.asarray(value, dtype=object)
+    try:
+        if array.shape == (size,):
+            low = high = np.array([to_float(f"{name}[{i}]", v) for i, v in enumerate(value)])
+        elif array.shape == (2, size):
+            low = np.array([to_float(f"{name}[0][{i}]", v) for i, v in enumerate(value[0])])
+            high = np.array([to_float(f"{name}[1][{i}]", v) for i, v in enumerate(value[1])])
+        else:
+            raise ValueError
+    except (ValueError, TypeError) as error:
+        if str(error):
+            raise
+        raise ValueError(
+            f"{name}: expected {size} numbers or a pair [[{size} lows], [{size} highs]], "
+            f"got {value!r}") from None
+    if np.any(low > high):
+        raise ValueError(f"{name}: range low {low.tolist()} exceeds high {high.tolist()}")
+    return low, high
+
+
+def parse_choice(name: str, value: Any, allowed: Iterable[str]) -> str:
+    """``value`` if it is one of ``allowed``, else ``ValueError`` listing them."""
+    allowed = tuple(allowed)
+    if value not in allowed:
+        raise ValueError(f"{name}: {value!r} is not one of {', '.join(allowed)}")
+    return value
+
+
+def parse_probability(name: str, value: Any) -> float:
+    number = to_float(name, value)
+    if not 0.0 <= number <= 1.0:
+        raise ValueError(f"{name}: a probability must be in [0, 1], got {number}")
+    return number
+
+
+def check_known(kind: str, given: Mapping[str, Any], allowed: Iterable[str]) -> None:
+    """Raise ``ValueError`` naming every unknown key, the nearest allowed one and all allowed."""
+    import difflib
+
+    allowed = sorted(allowed)
+    unknown = [key for key in given if key not in allowed]
+    if unknown:
+        hints = []
+        for key in unknown:
+            near = difflib.get_close_matches(str(key), allowed, n=1)
+            hints.append(f"{key!r}" + (f" (did you mean {near[0]!r}?)" if near else ""))
+        raise ValueError(f"unknown {kind} {', '.join(hints)}; allowed: {', '.join(allowed)}")
+
+
+def parse_weights(name: str, weights: Mapping[str, Any], terms: Iterable[str]) -> dict[str, float]:
+    """Reward weights keyed by term name; unknown terms are an error."""
+    if not isinstance(weights, Mapping):
+        raise ValueError(f"{name}: expected a mapping of term -> weight, got {weights!r}")
+    check_known(f"reward term in {name}", weights, terms)
+    return {term: to_float(f"{name}.{term}", weight) for term, weight in weights.items()}

@@ -1,0 +1,58 @@
+"""Official MyoChallenge 2022 metrics, shared by the envs, the training callback and the evaluator.
+
+Baoding (myosuite ``BaodingEnv.get_metrics``): an episode's score is its number of solved
+steps divided by the 200-step horizon, so steps lost to an early drop count as unsolved;
+the score is the mean over episodes. Effort is the mean over episodes of the per-step
+muscle activation norm ``|act| / 39``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """What one finished episode contributes to the official metrics."""
+
+    solved_steps: int
+    length: int
+    horizon: int
+    dropped: bool
+    effort: float  # mean over the episode's steps of |act| / n_muscles
+    direction: str | None = None  # Baoding: hold, cw or ccw
+
+    @property
+    def score(self) -> float:
+        """Official per-episode Baoding score: solved steps over the full horizon."""
+        return self.solved_steps / self.horizon
+
+    def to_dict(self) -> dict:
+        return {**asdict(self), "score": self.score}
+
+
+def baoding_score(episodes: Sequence[EpisodeResult]) -> float:
+    """Mean official Baoding score; ``nan`` for no episodes."""
+    return float(np.mean([e.score for e in episodes])) if episodes else math.nan
+
+
+def mean_effort(episodes: Sequence[EpisodeResult]) -> float:
+    return float(np.mean([e.effort for e in episodes])) if episodes else math.nan
+
+
+def drop_rate(episodes: Sequence[EpisodeResult]) -> float:
+    return float(np.mean([e.dropped for e in episodes])) if episodes else math.nan
+
+
+def mean_confidence_interval(values: Sequence[float], z: float = 1.96) -> tuple[float, float, float]:
+    """``(mean, low, high)``: the mean and its normal-approximation 95% interval."""
+    values = np.asarray(values, dtype=float)
+    if values.size == 0:
+        return math.nan, math.nan, math.nan
+    mean = float(values.mean())
+    half = z * float(values.std(ddof=1)) / math.sqrt(values.size) if values.size > 1 else 0.0
+    return mean, mean - half, mean + half

@@ -1,0 +1,297 @@
+"""Behaviour of our Baoding env on its own: spaces, determinism, targets, RSI, drops, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401  (registers the ids)
+from envs.baoding import (
+    OFFICIAL_START_ANGLE,
+    ORBIT_CENTER,
+    BaodingEnv,
+    BaodingTask,
+    parse_knobs,
+)
+
+
+def rollout(env: BaodingEnv, seed: int, steps: int, action_seed: int = 0):
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(action_seed)
+    observations, rewards = [obs], []
+    for _ in range(steps):
+        obs, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 39).astype(np.float32))
+        observations.append(obs)
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    return np.array(observations), np.array(rewards)
+
+
+def test_spaces_and_dtypes():
+    env = BaodingEnv()
+    assert env.action_space.shape == (39,) and env.action_space.dtype == np.float32
+    assert np.all(env.action_space.low == -1) and np.all(env.action_space.high == 1)
+    assert env.observation_space.shape == (86,) and env.observation_space.dtype == np.float32
+    obs, info = env.reset(seed=0)
+    assert obs.dtype == np.float32 and obs.shape == (86,)
+    assert isinstance(info["task"], BaodingTask)
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    assert obs.shape == (86,) and isinstance(reward, float)
+    for term in ("pos_dist_1", "pos_dist_2", "act_reg", "solved", "alive", "done", "sparse",
+                 "dropped", "unstable", "task"):
+        assert term in info
+    # The reward is the weighted sum of the named terms (official weights: 5, 5).
+    assert reward == pytest.approx(5 * info["pos_dist_1"] + 5 * info["pos_dist_2"])
+
+
+def test_gymnasium_ids_and_checker():
+    from gymnasium.utils.env_checker import check_env
+
+    for env_id, preset in (("myosds/BaodingP1-v0", "p1"), ("myosds/BaodingP2-v0", "p2")):
+        env = gym.make(env_id)
+        assert env.unwrapped.preset == preset
+    env = gym.make("myosds/Baoding-v0", direction="hold", period="static")
+    assert env.unwrapped.knobs.direction == "hold" and env.unwrapped.knobs.period is None
+    check_env(BaodingEnv(), skip_render_check=True)
+
+
+def test_observation_layout_matches_state():
+    env = BaodingEnv()
+    obs, _ = env.reset(seed=3)
+    obs, *_ = env.step(np.zeros(39, np.float32))
+    data = env.data
+    np.testing.assert_allclose(obs[:23], data.qpos[:23], atol=1e-6)
+    np.testing.assert_allclose(obs[23:26], data.qpos[23:26], atol=1e-6)  # ball 1 centre
+    np.testing.assert_allclose(obs[26:29], data.qvel[23:26] * 0.025, atol=1e-6)
+    np.testing.assert_allclose(obs[41:44], obs[35:38] - obs[23:26], atol=1e-6)
+    np.testing.assert_allclose(obs[47:], data.act, atol=1e-6)
+
+
+def test_same_seed_same_episode_and_different_seed_differs():
+    env_a, env_b = BaodingEnv("p2"), BaodingEnv("p2")
+    obs_a, rew_a = rollout(env_a, seed=11, steps=40)
+    obs_b, rew_b = rollout(env_b, seed=11, steps=40)
+    np.testing.assert_array_equal(obs_a, obs_b)
+    np.testing.assert_array_equal(rew_a, rew_b)
+    assert env_a.task == env_b.task
+    env_b.reset(seed=12)
+    assert env_b.task != env_a.task
+
+
+@pytest.mark.parametrize("direction,sign", [("ccw", 1), ("cw", -1), ("hold", 0)])
+def test_target_trajectory_formula(direction, sign):
+    period, rx, ry, start = 4.0, 0.024, 0.030, 0.3
+    task = BaodingTask(direction, period, rx, ry, start, (0.022,) * 2, (0.043,) * 2,
+                       ((1.0, 0.005, 0.0001),) * 2)
+    env = BaodingEnv(drop_height=-10.0)  # never drop, so the episode runs long enough
+    env.reset(seed=0, options={"task": task})
+    target_1, target_2 = env._target_sites
+    for step in range(60):
+        if step in (0, 1, 17, 59):
+            # During step t the targets sit at angle(t) = start + sign 2 pi t dt / T.
+            angle = start + sign * 2 * math.pi * step * 0.025 / period
+            expected_1 = (rx * math.cos(angle) - 0.0125, ry * math.sin(angle) - 0.07)
+            expected_2 = (rx * math.cos(angle - math.pi) - 0.0125, ry * math.sin(angle - math.pi) - 0.07)
+            env._place_targets(step)
+            np.testing.assert_allclose(env.model.site_pos[target_1, :2], expected_1, atol=1e-12)
+            np.testing.assert_allclose(env.model.site_pos[target_2, :2], expected_2, atol=1e-12)
+        env.step(np.zeros(39, np.float32))
+    assert ORBIT_CENTER == (-0.0125, -0.07)
+
+
+def test_static_targets_never_move_in_the_palm():
+    env = BaodingEnv(direction="ccw", period="static", drop_height=-10.0)
+    env.reset(seed=0)
+    assert math.isinf(env.task.period)
+    target_1, target_2 = env._target_sites
+    first = env.model.site_pos[[target_1, target_2]].copy()
+    for _ in range(100):
+        env.step(np.full(39, 0.5, np.float32))
+        np.testing.assert_array_equal(env.model.site_pos[[target_1, target_2]], first)
+
+
+def test_rsi_puts_balls_on_targets():
+    env = BaodingEnv(rsi_probability=1.0, start_angle="uniform", finger_noise=0.1, palm_noise=0.05)
+    for seed in range(5):
+        obs, _ = env.reset(seed=seed)
+        assert np.linalg.norm(obs[41:44]) < 1e-3 and np.linalg.norm(obs[44:47]) < 1e-3
+        _, _, _, _, info = env.step(np.zeros(39, np.float32))
+        assert info["solved"] == 1.0  # still on target after one step
+    # Without RSI the official start leaves the targets 2.5 and 3.7 cm from the balls.
+    obs, _ = BaodingEnv().reset(seed=0)
+    assert np.linalg.norm(obs[41:44]) == pytest.approx(0.025, abs=2e-3)
+    assert np.linalg.norm(obs[44:47]) == pytest.approx(0.037, abs=2e-3)
+
+
+def test_rsi_probability_is_a_probability_over_episodes():
+    env = BaodingEnv(rsi_probability=0.5)
+    on_target = [np.linalg.norm(env.reset(seed=s)[0][41:44]) < 1e-3 for s in range(60)]
+    assert 15 < sum(on_target) < 45
+
+
+def test_on_balls_start_angle_puts_targets_near_balls():
+    obs, _ = BaodingEnv(start_angle="on_balls").reset(seed=0)
+    assert np.linalg.norm(obs[41:44]) < 0.015 and np.linalg.norm(obs[44:47]) < 0.015
+
+
+def test_drop_terminates_with_episode_result():
+    env = BaodingEnv()
+    env.reset(seed=0)
+    for step in range(200):
+        obs, reward, terminated, truncated, info = env.step(np.zeros(39, np.float32))
+        if terminated:
+            break
+    assert terminated and not truncated and step < 60
+    assert info["dropped"] and info["alive"] == 0.0 and info["solved"] == 0.0
+    assert min(obs[25], obs[31]) < 1.25
+    result = info["episode_result"]
+    assert result.length == step + 1 and result.dropped and result.horizon == 200
+    assert result.score == result.solved_steps / 200
+
+
+def test_truncates_at_horizon():
+    env = BaodingEnv(drop_height=-10.0, horizon=30)
+    env.reset(seed=0)
+    for step in range(30):
+        _, _, terminated, truncated, info = env.step(np.zeros(39, np.float32))
+        assert not terminated
+        assert truncated == (step == 29)
+    assert info["episode_result"].length == 30
+
+
+def test_presets_equal_official_ranges():
+    p1 = parse_knobs("p1")
+    assert p1.direction == "ccw" and (p1.period.low, p1.period.high) == (5.0, 5.0)
+    assert (p1.x_radius.low, p1.y_radius.low) == (0.025, 0.028)
+    assert p1.start_angle == "fixed" and OFFICIAL_START_ANGLE == pytest.approx(math.pi / 4)
+    assert p1.ball_size is None and p1.ball_mass is None and p1.ball_friction is None
+    assert p1.drop_height == 1.25 and p1.solved_radius == 0.015
+    assert dict(p1.reward_weights) == {"pos_dist_1": 5.0, "pos_dist_2": 5.0}
+    p2 = parse_knobs("p2")
+    assert p2.direction == "random" and p2.start_angle == "uniform"
+    assert (p2.period.low, p2.period.high) == (4.0, 6.0)
+    assert (p2.x_radius.low, p2.x_radius.high) == (0.020, 0.030)
+    assert (p2.y_radius.low, p2.y_radius.high) == (0.022, 0.032)
+    assert (p2.ball_size.low, p2.ball_size.high) == (0.018, 0.024)
+    assert (p2.ball_mass.low, p2.ball_mass.high) == (0.030, 0.300)
+    np.testing.assert_allclose(p2.ball_friction[0], (0.8, 0.004, 0.00008))
+    np.testing.assert_allclose(p2.ball_friction[1], (1.2, 0.006, 0.00012))
+    env = BaodingEnv()
+    assert env.model.geom_size[env._ball_geoms[0], 0] == 0.022
+    assert env.model.body_mass[env._ball_bodies[0]] == pytest.approx(0.043)
+
+
+def test_configure_replaces_distribution_from_preset():
+    env = BaodingEnv("p2")
+    env.configure(direction="hold", period="static", rsi_probability=1.0)
+    assert env.knobs.direction == "hold" and env.knobs.ball_mass is not None  # p2 kept
+    env.configure(preset="p1", period=[10, 12])
+    assert env.knobs.direction == "ccw" and env.knobs.ball_mass is None
+    env.reset(seed=1)
+    assert 10 <= env.task.period <= 12
+
+
+@pytest.mark.parametrize("knobs,message", [
+    ({"directon": "cw"}, "did you mean 'direction'"),
+    ({"direction": "sideways"}, "not one of hold, cw, ccw, random"),
+    ({"period": [6, 4]}, "reversed"),
+    ({"period": []}, "a range is [low, high]"),
+    ({"period": -1}, "must be > 0"),
+    ({"x_radius": "wide"}, "expected a number"),
+    ({"rsi_probability": 1.5}, "probability must be in [0, 1]"),
+    ({"ball_friction": [1, 2]}, "expected 3 numbers"),
+    ({"finger_noise": -0.1}, "must be >= 0"),
+    ({"reward_weights": {"pos_dist": 1}}, "unknown reward term"),
+    ({"ball_mass": float("nan")}, "finite"),
+])
+def test_bad_knobs_name_the_problem(knobs, message):
+    with pytest.raises(ValueError) as error:
+        BaodingEnv(**knobs)
+    assert message in str(error.value)
+    assert list(knobs)[0] in str(error.value) or "did you mean" in str(error.value)
+
+
+def test_unknown_preset_lists_allowed():
+    with pytest.raises(ValueError, match="p3.*not one of p1, p2"):
+        BaodingEnv("p3")
+
+
+def test_numeric_strings_from_yaml_are_accepted():
+    knobs = parse_knobs("p1", solved_radius="1.5e-2", period=["4e0", "6"])
+    assert knobs.solved_radius == 0.015 and knobs.period.high == 6.0
+
+
+def test_nan_action_raises_and_leaves_simulation_untouched():
+    env = BaodingEnv()
+    env.reset(seed=0)
+    env.step(np.zeros(39, np.float32))
+    qpos, time = env.data.qpos.copy(), env.data.time
+    bad = np.zeros(39, np.float32)
+    bad[5] = np.nan
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(bad)
+    bad[5] = np.inf
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(bad)
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(38, np.float32))
+    np.testing.assert_array_equal(env.data.qpos, qpos)
+    assert env.data.time == time
+    env.step(np.zeros(39, np.float32))  # still usable
+
+
+def test_unstable_step_ends_episode_with_flag():
+    env = BaodingEnv()
+    obs, _ = env.reset(seed=0)
+    qvel = np.zeros(35)
+    qvel[:23] = 1e12  # far beyond what the integrator accepts
+    env.reset(seed=0, options={"state": {"qvel": qvel}})
+    obs, reward, terminated, truncated, info = env.step(np.zeros(39, np.float32))
+    assert info["unstable"] and terminated
+    assert np.isfinite(obs).all() and math.isfinite(reward)
+
+
+def test_reset_options_are_checked():
+    env = BaodingEnv()
+    with pytest.raises(ValueError, match="unknown reset option 'tsk'"):
+        env.reset(options={"tsk": {}})
+    with pytest.raises(ValueError, match="missing field"):
+        env.reset(options={"task": {"direction": "cw"}})
+    with pytest.raises(ValueError, match="state.qpos: expected shape"):
+        env.reset(options={"state": {"qpos": np.zeros(3)}})
+
+
+def test_task_round_trips_through_dict():
+    env = BaodingEnv("p2", period="static")
+    env.reset(seed=4)
+    values = env.task.to_dict()
+    assert values["period"] == "static"
+    assert BaodingTask.from_mapping(values) == env.task
+
+
+def test_ball_physics_edits_match_a_recompiled_model():
+    """Edited ball radius and mass give the inertia and bounds MuJoCo's compiler would."""
+    import mujoco
+
+    from envs.assets import load_hand_model
+
+    env = BaodingEnv()
+    task = BaodingTask("ccw", 5.0, 0.025, 0.028, 0.7, (0.019, 0.024), (0.25, 0.035),
+                       ((1.1, 0.005, 0.0001), (0.9, 0.004, 0.0001)))
+    env.reset(seed=0, options={"task": task})
+    _, spec = load_hand_model("myohand_baoding.xml")
+    spec = spec.copy()
+    for name, radius, mass in (("ball1", 0.019, 0.25), ("ball2", 0.024, 0.035)):
+        spec.geom(name).size = [radius, 0, 0]
+        spec.geom(name).mass = mass
+    compiled = spec.compile()
+    for field in ("body_mass", "body_inertia", "geom_rbound", "geom_aabb", "bvh_aabb",
+                  "dof_invweight0", "body_invweight0"):
+        np.testing.assert_allclose(getattr(env.model, field), getattr(compiled, field),
+                                   rtol=1e-9, atol=1e-12, err_msg=field)
+    # mj_setConst keeps stat.meaninertia, as in the official env (checked by the parity tests).
+    del mujoco

@@ -1,0 +1,24 @@
+"""Official metric functions against hand-computed values."""
+
+import math
+
+import pytest
+
+from envs.metrics import EpisodeResult, baoding_score, drop_rate, mean_confidence_interval, mean_effort
+
+
+def test_baoding_score_counts_steps_lost_to_a_drop_as_unsolved():
+    full = EpisodeResult(solved_steps=150, length=200, horizon=200, dropped=False, effort=0.2)
+    dropped = EpisodeResult(solved_steps=40, length=50, horizon=200, dropped=True, effort=0.4)
+    assert full.score == 0.75 and dropped.score == 0.2  # 40 / 200, not 40 / 50
+    assert baoding_score([full, dropped]) == pytest.approx(0.475)
+    assert mean_effort([full, dropped]) == pytest.approx(0.3)
+    assert drop_rate([full, dropped]) == 0.5
+    assert math.isnan(baoding_score([]))
+
+
+def test_confidence_interval():
+    mean, low, high = mean_confidence_interval([0.0, 1.0, 0.0, 1.0])
+    # std (ddof=1) = 0.57735; half width = 1.96 * 0.57735 / 2
+    assert mean == 0.5 and high - mean == pytest.approx(0.565803, abs=1e-6) and low == pytest.approx(1 - high)
+    assert mean_confidence_interval([0.3]) == (0.3, 0.3, 0.3)
