@@ -4,7 +4,10 @@ from gymnasium.envs.registration import register, registry
 
 from envs.baoding import BaodingEnv, BaodingTask
 
-__all__ = ["BaodingEnv", "BaodingTask"]
+__all__ = ["BaodingEnv", "BaodingTask", "TASKS"]
+
+# Task name (as written in curricula) -> env class.
+TASKS = {"baoding": BaodingEnv}
 
 _IDS = {
     "myosds/BaodingP1-v0": ("envs.baoding:BaodingEnv", {"preset": "p1"}),

@@ -231,6 +231,8 @@ class BaodingEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 40}
+    KNOBS = KNOB_HELP
+    validate_knobs = staticmethod(parse_knobs)
 
     def __init__(self, preset: str = "p1", render_mode: str | None = None,
                  horizon: int = HORIZON, **knobs: Any) -> None:

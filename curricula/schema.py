@@ -1,0 +1,377 @@
+"""Curriculum files and run configs: YAML in, validated typed objects out.
+
+Every problem is reported once, before training starts, as a :class:`ConfigError` naming the
+file, the key path (``stages[2].advance.threshold``), the bad value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from envs import TASKS
+
+
+class ConfigError(ValueError):
+    """A curriculum or run config that cannot be used; the message says where and why."""
+
+
+METRICS = ("score", "survival")
+METRIC_HELP = {
+    "score": "official per-episode score (Baoding: solved steps / 200, drops count as unsolved)",
+    "survival": "fraction of episodes that end without a drop",
+}
+ON_MAX_STEPS = ("advance", "stop")
+
+
+@dataclass(frozen=True)
+class AdvanceRule:
+    """When a stage is passed: the mean ``metric`` over the last ``window`` training
+    episodes of the stage reaches ``threshold``, after at least ``min_steps`` env steps.
+    After ``max_steps`` the stage ends unpassed and the run advances or stops."""
+
+    metric: str = "score"
+    threshold: float = 0.5
+    window: int = 100
+    min_steps: int = 0
+    max_steps: int | None = None
+    on_max_steps: str = "advance"
+
+
+@dataclass(frozen=True)
+class PpoOverrides:
+    """PPO settings a stage changes at its start (None: keep the current value)."""
+
+    learning_rate: float | None = None
+    n_steps: int | None = None
+    batch_size: int | None = None
+    clip_range: float | None = None
+    ent_coef: float | None = None
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
+
+
+@dataclass(frozen=True)
+class Stage:
+    name: str
+    env: Mapping[str, Any]  # complete knobs for the task (defaults merged in), validated
+    advance: AdvanceRule | None  # None: train on this stage until the step budget ends
+    ppo: PpoOverrides = PpoOverrides()
+
+
+@dataclass(frozen=True)
+class Curriculum:
+    name: str
+    task: str
+    stages: tuple[Stage, ...]
+    path: Path | None = None
+
+    def stage_index(self, name: str) -> int:
+        for index, stage in enumerate(self.stages):
+            if stage.name == name:
+                return index
+        raise KeyError(f"no stage named {name!r} in curriculum {self.name!r}; "
+                       f"stages: {', '.join(s.name for s in self.stages)}")
+
+
+@dataclass(frozen=True)
+class PolicyConfig:
+    lstm_hidden_size: int = 256
+    enable_critic_lstm: bool = True
+    net_arch: tuple[int, ...] = (256, 256)
+    activation: str = "relu"
+    log_std_init: float = -2.0
+    ortho_init: bool = True
+
+
+@dataclass(frozen=True)
+class PpoConfig:
+    """sb3-contrib RecurrentPPO hyper-parameters; defaults are the 2022 Baoding winner's."""
+
+    learning_rate: float = 2.56e-5
+    n_steps: int = 128
+    batch_size: int = 32
+    n_epochs: int = 10
+    gamma: float = 0.99
+    gae_lambda: float = 0.9
+    clip_range: float = 0.3
+    ent_coef: float = 3.6e-6
+    vf_coef: float = 0.84
+    max_grad_norm: float = 0.7
+
+
+@dataclass(frozen=True)
+class NormalizeConfig:
+    observations: bool = True
+    rewards: bool = True
+    clip_obs: float = 10.0
+    clip_reward: float = 10.0
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    curriculum: Curriculum
+    curriculum_path: Path
+    seed: int = 0
+    n_envs: int = 4
+    vec_env: str = "dummy"
+    device: str = "cpu"
+    num_threads: int = 1
+    total_steps: int = 1_000_000
+    checkpoint_every: int = 50_000  # env steps
+    keep_checkpoints: int = 3
+    output_dir: Path = Path("runs")
+    policy: PolicyConfig = PolicyConfig()
+    ppo: PpoConfig = PpoConfig()
+    normalize: NormalizeConfig = NormalizeConfig()
+    source: Mapping[str, Any] = field(default_factory=dict)  # the YAML as read, for the run folder
+
+
+ACTIVATIONS = ("relu", "tanh", "elu", "leaky_relu")
+VEC_ENVS = ("dummy", "subproc")
+
+
+# -- low-level readers -------------------------------------------------------------------
+
+class _Reader:
+    """Reads values out of one YAML file, raising errors that name the file and key path."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def error(self, key: str, message: str) -> ConfigError:
+        where = f"{self.path}: {key}: " if key else f"{self.path}: "
+        return ConfigError(where + message)
+
+    def mapping(self, key: str, value: Any, allowed: Mapping[str, Any] | tuple[str, ...]) -> Mapping[str, Any]:
+        if value is None:
+            return {}
+        if not isinstance(value, Mapping):
+            raise self.error(key, f"expected a mapping, got {type(value).__name__} {value!r}")
+        allowed = tuple(allowed)
+        for name in value:
+            if name not in allowed:
+                near = difflib.get_close_matches(str(name), allowed, n=1)
+                hint = f" (did you mean {near[0]!r}?)" if near else ""
+                prefix = f"{key}." if key else ""
+                raise self.error(f"{prefix}{name}", f"unknown key{hint}; allowed: {', '.join(allowed)}")
+        return value
+
+    def number(self, key: str, value: Any, *, integer: bool = False, low: float | None = None,
+               high: float | None = None, strict_low: bool = False) -> float | int:
+        kind = "an integer" if integer else "a number"
+        if isinstance(value, bool):
+            raise self.error(key, f"expected {kind}, got the boolean {value!r}")
+        try:
+            number = float(value)  # PyYAML reads 3e-4 as a string
+        except (TypeError, ValueError):
+            raise self.error(key, f"expected {kind}, got {value!r}") from None
+        if not math.isfinite(number):
+            raise self.error(key, f"expected a finite number, got {value!r}")
+        if integer:
+            if number != int(number):
+                raise self.error(key, f"expected an integer, got {value!r}")
+            number = int(number)
+        if low is not None and (number <= low if strict_low else number < low):
+            raise self.error(key, f"must be {'>' if strict_low else '>='} {low}, got {value!r}")
+        if high is not None and number > high:
+            raise self.error(key, f"must be <= {high}, got {value!r}")
+        return number
+
+    def boolean(self, key: str, value: Any) -> bool:
+        if not isinstance(value, bool):
+            raise self.error(key, f"expected true or false, got {value!r}")
+        return value
+
+    def choice(self, key: str, value: Any, allowed: tuple[str, ...]) -> str:
+        if value not in allowed:
+            raise self.error(key, f"{value!r} is not one of {', '.join(allowed)}")
+        return value
+
+    def string(self, key: str, value: Any) -> str:
+        if not isinstance(value, str) or not value:
+            raise self.error(key, f"expected a non-empty string, got {value!r}")
+        return value
+
+
+def _load_yaml(path: Path, what: str) -> Any:
+    if not path.is_file():
+        raise ConfigError(f"{path}: {what} file not found")
+    try:
+        with path.open() as file:
+            return yaml.safe_load(file)
+    except yaml.YAMLError as error:
+        raise ConfigError(f"{path}: not valid YAML: {error}") from None
+
+
+def _dataclass_from(reader: _Reader, key: str, raw: Any, cls: type, defaults: Any = None) -> Any:
+    """Fill a flat dataclass of numbers/bools/strings from a mapping, checking each value."""
+    base = defaults if defaults is not None else cls()
+    names = tuple(f.name for f in fields(cls))
+    raw = reader.mapping(key, raw, names)
+    values = {}
+    for name, value in raw.items():
+        path, default = f"{key}.{name}", getattr(base, name)
+        if name == "net_arch":
+            if not isinstance(value, (list, tuple)) or not value:
+                raise reader.error(path, f"expected a list of layer sizes, got {value!r}")
+            values[name] = tuple(reader.number(f"{path}[{i}]", v, integer=True, low=1) for i, v in enumerate(value))
+        elif name == "activation":
+            values[name] = reader.choice(path, value, ACTIVATIONS)
+        elif isinstance(default, bool):
+            values[name] = reader.boolean(path, value)
+        elif name in ("gamma", "gae_lambda"):
+            values[name] = reader.number(path, value, low=0, high=1)
+        elif isinstance(default, int) or name in ("n_steps", "batch_size"):
+            values[name] = reader.number(path, value, integer=True, low=1)
+        elif name == "log_std_init":
+            values[name] = reader.number(path, value)
+        else:
+            values[name] = reader.number(path, value, low=0, strict_low=name in (
+                "learning_rate", "clip_range", "max_grad_norm", "clip_obs", "clip_reward"))
+    return type(base)(**{**{f.name: getattr(base, f.name) for f in fields(cls)}, **values})
+
+
+# -- curriculum --------------------------------------------------------------------------
+
+def _advance_rule(reader: _Reader, key: str, raw: Any) -> AdvanceRule | None:
+    if raw is None:
+        return None
+    names = tuple(f.name for f in fields(AdvanceRule))
+    raw = reader.mapping(key, raw, names)
+    rule = AdvanceRule()
+    values: dict[str, Any] = {}
+    if "metric" in raw:
+        values["metric"] = reader.choice(f"{key}.metric", raw["metric"], METRICS)
+    if "threshold" in raw:
+        values["threshold"] = reader.number(f"{key}.threshold", raw["threshold"], low=0, high=1)
+    if "window" in raw:
+        values["window"] = reader.number(f"{key}.window", raw["window"], integer=True, low=1)
+    if "min_steps" in raw:
+        values["min_steps"] = reader.number(f"{key}.min_steps", raw["min_steps"], integer=True, low=0)
+    if raw.get("max_steps") is not None:
+        values["max_steps"] = reader.number(f"{key}.max_steps", raw["max_steps"], integer=True, low=1)
+    if "on_max_steps" in raw:
+        values["on_max_steps"] = reader.choice(f"{key}.on_max_steps", raw["on_max_steps"], ON_MAX_STEPS)
+    rule = AdvanceRule(**{**rule.__dict__, **values})
+    if rule.max_steps is not None and rule.max_steps < rule.min_steps:
+        raise reader.error(f"{key}.max_steps", f"{rule.max_steps} is below min_steps {rule.min_steps}")
+    return rule
+
+
+def _stage_env(reader: _Reader, key: str, task: str, knobs: Mapping[str, Any]) -> dict[str, Any]:
+    """Check a stage's merged knobs against the task's env; return them as given."""
+    env_cls = TASKS[task]
+    knobs = dict(knobs)
+    reader.mapping(key, knobs, ("preset", *env_cls.KNOBS))
+    try:
+        env_cls.validate_knobs(**knobs)
+    except ValueError as error:
+        raise reader.error(key, str(error)) from None
+    return knobs
+
+
+def load_curriculum(path: str | Path) -> Curriculum:
+    """Read and validate a curriculum file (see README, "Writing a curriculum").
+
+    Raises:
+        ConfigError: for a missing file, bad YAML, or any bad key or value.
+    """
+    path = Path(path)
+    reader = _Reader(path)
+    raw = reader.mapping("", _load_yaml(path, "curriculum"), ("name", "task", "defaults", "stages"))
+    if not raw:
+        raise reader.error("", "the curriculum file is empty")
+    task = reader.choice("task", raw.get("task", "baoding"), tuple(TASKS))
+    name = reader.string("name", raw.get("name", path.stem))
+    defaults = reader.mapping("defaults", raw.get("defaults"), ("preset", *TASKS[task].KNOBS))
+    stages_raw = raw.get("stages")
+    if not isinstance(stages_raw, list) or not stages_raw:
+        raise reader.error("stages", "expected a non-empty list of stages")
+    stages, seen = [], set()
+    for index, stage_raw in enumerate(stages_raw):
+        key = f"stages[{index}]"
+        stage_raw = reader.mapping(key, stage_raw, ("name", "env", "advance", "ppo"))
+        stage_name = reader.string(f"{key}.name", stage_raw.get("name", f"stage_{index + 1}"))
+        if stage_name in seen:
+            raise reader.error(f"{key}.name", f"duplicate stage name {stage_name!r}")
+        seen.add(stage_name)
+        overrides = reader.mapping(f"{key}.env", stage_raw.get("env"), ("preset", *TASKS[task].KNOBS))
+        env = _stage_env(reader, f"{key}.env", task, {**defaults, **overrides})
+        advance = _advance_rule(reader, f"{key}.advance", stage_raw.get("advance"))
+        ppo = _dataclass_from(reader, f"{key}.ppo", stage_raw.get("ppo"), PpoOverrides)
+        stages.append(Stage(stage_name, env, advance, ppo))
+    return Curriculum(name=name, task=task, stages=tuple(stages), path=path)
+
+
+# -- run config --------------------------------------------------------------------------
+
+RUN_KEYS = ("curriculum", "seed", "n_envs", "vec_env", "device", "num_threads", "total_steps",
+            "checkpoint_every", "keep_checkpoints", "output_dir", "policy", "ppo", "normalize")
+
+
+def _set_key(reader: _Reader, raw: dict[str, Any], assignment: str) -> None:
+    """Apply one ``a.b=value`` override (value parsed as YAML) to the raw config."""
+    if "=" not in assignment:
+        raise ConfigError(f"--set {assignment!r}: expected key=value, e.g. ppo.learning_rate=3e-4")
+    dotted, text = assignment.split("=", 1)
+    keys = dotted.strip().split(".")
+    node = raw
+    for depth, key in enumerate(keys[:-1]):
+        allowed = RUN_KEYS if depth == 0 else None
+        if allowed is not None and key not in allowed:
+            reader.mapping("", {key: None}, allowed)
+        node = node.setdefault(key, {})
+        if not isinstance(node, dict):
+            raise ConfigError(f"--set {assignment!r}: {'.'.join(keys[:depth + 1])} is not a mapping")
+    node[keys[-1]] = yaml.safe_load(text)
+
+
+def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunConfig:
+    """Read a run config (and ``--set key=value`` overrides), including its curriculum.
+
+    Raises:
+        ConfigError: for a missing file, bad YAML, or any bad key or value.
+    """
+    path = Path(path)
+    reader = _Reader(path)
+    raw = dict(reader.mapping("", _load_yaml(path, "run config") or {}, RUN_KEYS))
+    for assignment in overrides:
+        _set_key(reader, raw, assignment)
+    reader.mapping("", raw, RUN_KEYS)
+    if "curriculum" not in raw:
+        raise reader.error("curriculum", "missing: the curriculum file this run follows")
+    curriculum_path = Path(reader.string("curriculum", raw["curriculum"]))
+    if not curriculum_path.is_absolute():
+        curriculum_path = (path.parent / curriculum_path).resolve()
+    if not curriculum_path.is_file():
+        raise reader.error("curriculum", f"curriculum file not found: {curriculum_path}")
+    values: dict[str, Any] = {}
+    integer_keys = {"seed": 0, "n_envs": 1, "num_threads": 1, "total_steps": 1,
+                    "checkpoint_every": 1, "keep_checkpoints": 1}
+    for key, low in integer_keys.items():
+        if key in raw:
+            values[key] = reader.number(key, raw[key], integer=True, low=low)
+    if "vec_env" in raw:
+        values["vec_env"] = reader.choice("vec_env", raw["vec_env"], VEC_ENVS)
+    if "device" in raw:
+        values["device"] = reader.choice("device", raw["device"], ("cpu", "cuda", "auto"))
+    if "output_dir" in raw:
+        values["output_dir"] = Path(reader.string("output_dir", raw["output_dir"]))
+    values["policy"] = _dataclass_from(reader, "policy", raw.get("policy"), PolicyConfig)
+    values["ppo"] = _dataclass_from(reader, "ppo", raw.get("ppo"), PpoConfig)
+    values["normalize"] = _dataclass_from(reader, "normalize", raw.get("normalize"), NormalizeConfig)
+    curriculum = load_curriculum(curriculum_path)
+    config = RunConfig(curriculum=curriculum, curriculum_path=curriculum_path, source=raw, **values)
+    rollout = config.ppo.n_steps * config.n_envs
+    if config.ppo.batch_size > rollout:
+        raise reader.error("ppo.batch_size", f"{config.ppo.batch_size} exceeds the rollout size "
+                           f"n_steps x n_envs = {rollout}")
+    return config

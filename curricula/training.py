@@ -1,0 +1,547 @@
+"""Curriculum training with sb3-contrib RecurrentPPO: stages, checkpoints, resume, signals.
+
+The loop runs ``model.learn`` one rollout at a time. Between rollouts it feeds the finished
+training episodes of the current stage to :func:`curricula.advancement.decide`, switches
+stages in place (``env_method("configure", ...)`` on every worker; same model, same
+normalization statistics), applies the stage's PPO overrides, and writes checkpoints.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import multiprocessing
+import os
+import platform
+import signal
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from stable_baselines3.common.callbacks import BaseCallback
+
+from curricula.advancement import Decision, StageProgress, decide, episode_metric
+from curricula.schema import (
+    ConfigError,
+    Curriculum,
+    PpoConfig,
+    RunConfig,
+    Stage,
+    load_run_config,
+)
+from envs import TASKS
+from envs.metrics import EpisodeResult
+
+STATE_FILE = "curriculum_state.json"
+CHECKPOINT_DIR = "checkpoints"
+LATEST_FILE = "latest.json"
+EPISODES_FILE = "episodes.csv"
+EPISODE_COLUMNS = ("step", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
+                   "effort", "direction")
+
+
+# -- envs --------------------------------------------------------------------------------
+
+def stage_knobs(stage: Stage) -> dict[str, Any]:
+    """The complete knobs a stage sends to every env (the preset is always explicit)."""
+    return {"preset": "p1", **stage.env}
+
+
+def _make_env(task: str, knobs: dict[str, Any], seed: int) -> Callable[[], Any]:
+    def build():
+        if multiprocessing.current_process().name != "MainProcess":
+            # Ctrl-C goes to the whole process group: let the main process save and stop
+            # the workers, instead of the workers dying mid-step.
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        env = TASKS[task](**knobs)
+        env.reset(seed=seed)
+        return env
+    return build
+
+
+def build_vec_env(config: RunConfig, stage: Stage):
+    """The training VecEnv (``n_envs`` workers, seeded ``seed + rank``) under VecNormalize."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+    knobs = stage_knobs(stage)
+    factories = [_make_env(config.curriculum.task, knobs, config.seed + rank) for rank in range(config.n_envs)]
+    venv = SubprocVecEnv(factories) if config.vec_env == "subproc" else DummyVecEnv(factories)
+    venv.seed(config.seed)
+    norm = config.normalize
+    return VecNormalize(venv, norm_obs=norm.observations, norm_reward=norm.rewards,
+                        clip_obs=norm.clip_obs, clip_reward=norm.clip_reward, gamma=config.ppo.gamma)
+
+
+# -- model -------------------------------------------------------------------------------
+
+def build_model(config: RunConfig, venv, tensorboard_dir: Path):
+    import torch
+    from sb3_contrib import RecurrentPPO
+
+    activations = {"relu": torch.nn.ReLU, "tanh": torch.nn.Tanh, "elu": torch.nn.ELU,
+                   "leaky_relu": torch.nn.LeakyReLU}
+    policy = config.policy
+    ppo = config.ppo
+    policy_kwargs = {
+        "lstm_hidden_size": policy.lstm_hidden_size,
+        "enable_critic_lstm": policy.enable_critic_lstm,
+        "shared_lstm": False,
+        "net_arch": {"pi": list(policy.net_arch), "vf": list(policy.net_arch)},
+        "activation_fn": activations[policy.activation],
+        "log_std_init": policy.log_std_init,
+        "ortho_init": policy.ortho_init,
+    }
+    return RecurrentPPO(
+        "MlpLstmPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps,
+        batch_size=ppo.batch_size, n_epochs=ppo.n_epochs, gamma=ppo.gamma,
+        gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range, ent_coef=ppo.ent_coef,
+        vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, policy_kwargs=policy_kwargs,
+        seed=config.seed, device=config.device, verbose=0)
+
+
+def effective_ppo(base: PpoConfig, curriculum: Curriculum, stage_index: int) -> dict[str, Any]:
+    """PPO settings in force at a stage: the run's, then each stage's overrides in order up
+    to this one (an override stays until a later stage changes it)."""
+    settings = {k: getattr(base, k) for k in ("learning_rate", "n_steps", "batch_size", "clip_range", "ent_coef")}
+    for stage in curriculum.stages[: stage_index + 1]:
+        settings.update(stage.ppo.as_dict())
+    return settings
+
+
+def apply_ppo_settings(model, settings: dict[str, Any]) -> None:
+    """Set learning rate, clip range, entropy coefficient, batch size and rollout length."""
+    from stable_baselines3.common.utils import ConstantSchedule
+
+    model.learning_rate = settings["learning_rate"]
+    model.lr_schedule = ConstantSchedule(settings["learning_rate"])
+    model.clip_range = ConstantSchedule(settings["clip_range"])
+    model.ent_coef = settings["ent_coef"]
+    model.batch_size = settings["batch_size"]
+    if settings["n_steps"] != model.n_steps:
+        model.n_steps = settings["n_steps"]
+        buffer = model.rollout_buffer
+        lstm = model.policy.lstm_actor
+        model.rollout_buffer = type(buffer)(
+            model.n_steps, model.observation_space, model.action_space,
+            (model.n_steps, lstm.num_layers, model.n_envs, lstm.hidden_size), model.device,
+            gamma=model.gamma, gae_lambda=model.gae_lambda, n_envs=model.n_envs)
+
+
+# -- curriculum state ---------------------------------------------------------------------
+
+@dataclass
+class CurriculumState:
+    """Where the run is in its curriculum; saved with every checkpoint."""
+
+    stage_index: int = 0
+    stage_start_step: int = 0
+    stage_episodes: int = 0
+    recent: list[float] = field(default_factory=list)  # the advancement window's values
+    episodes_per_stage: dict[str, int] = field(default_factory=dict)
+    steps_per_stage: dict[str, int] = field(default_factory=dict)
+    history: list[dict[str, Any]] = field(default_factory=list)  # one entry per transition
+    status: str = "running"  # running | completed | stopped | budget_reached | interrupted
+    num_timesteps: int = 0
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2)
+
+    @classmethod
+    def from_json(cls, text: str) -> "CurriculumState":
+        return cls(**json.loads(text))
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+# -- callback ----------------------------------------------------------------------------
+
+class EpisodeCollector(BaseCallback):
+    """SB3 callback: gathers finished episodes of the current stage, logs reward terms,
+    drives the progress bar, and stops ``learn`` when a stop was requested."""
+
+    def __init__(self, n_envs: int, stage_index: int, progress_bar: Any = None) -> None:
+        super().__init__(verbose=0)
+        self.stage_index = stage_index
+        self.episode_stage = [stage_index] * n_envs  # stage each env's current episode began in
+        self.results: list[tuple[int, EpisodeResult]] = []
+        self.term_sums: dict[str, float] = {}
+        self.term_count = 0
+        self.stop_requested: str | None = None
+        self.progress_bar = progress_bar
+
+    def _on_step(self) -> bool:
+        infos, dones = self.locals["infos"], self.locals["dones"]
+        for rank, (info, done) in enumerate(zip(infos, dones)):
+            for key in ("pos_dist_1", "pos_dist_2", "act_reg", "solved", "alive"):
+                if key in info:
+                    self.term_sums[key] = self.term_sums.get(key, 0.0) + info[key]
+            if done:
+                result = info.get("episode_result")
+                if result is not None and self.episode_stage[rank] == self.stage_index:
+                    self.results.append((self.num_timesteps, result))
+                self.episode_stage[rank] = self.stage_index
+        self.term_count += len(infos)
+        if self.progress_bar is not None:
+            self.progress_bar.update(len(infos))
+        return self.stop_requested is None
+
+    def pop_results(self) -> list[tuple[int, EpisodeResult]]:
+        results, self.results = self.results, []
+        return results
+
+    def pop_term_means(self) -> dict[str, float]:
+        means = {k: v / self.term_count for k, v in self.term_sums.items()} if self.term_count else {}
+        self.term_sums, self.term_count = {}, 0
+        return means
+
+
+# -- the run -----------------------------------------------------------------------------
+
+def _package_versions() -> dict[str, str]:
+    from importlib import metadata
+
+    versions = {"python": platform.python_version(), "platform": platform.platform()}
+    for name in ("mujoco", "gymnasium", "stable-baselines3", "sb3-contrib", "torch", "numpy", "myosuite"):
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def new_run_dir(config: RunConfig, config_path: Path) -> Path:
+    """A fresh, race-free run folder ``<output_dir>/<config>-<date>-<time>-s<seed>[-n]``."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    base = config.output_dir / f"{config_path.stem}-{stamp}-s{config.seed}"
+    for attempt in range(1000):
+        candidate = base if attempt == 0 else base.with_name(f"{base.name}-{attempt}")
+        try:
+            candidate.mkdir(parents=True, exist_ok=False)
+            return candidate
+        except FileExistsError:
+            continue
+    raise RuntimeError(f"could not create a run folder next to {base}")
+
+
+class CurriculumTrainer:
+    """Train a RecurrentPPO policy through a curriculum into a run folder.
+
+    Use :meth:`start` for a new run and :meth:`resume` to continue one; then :meth:`run`.
+    """
+
+    def __init__(self, config: RunConfig, run_dir: Path, state: CurriculumState, model, venv,
+                 progress: bool = True) -> None:
+        self.config, self.run_dir, self.state = config, run_dir, state
+        self.model, self.venv = model, venv
+        self.show_progress = progress
+        self.checkpoint_dir = run_dir / CHECKPOINT_DIR
+        self.checkpoint_dir.mkdir(exist_ok=True)
+        self.next_checkpoint = (state.num_timesteps // config.checkpoint_every + 1) * config.checkpoint_every
+        self.progress = StageProgress(steps=state.num_timesteps - state.stage_start_step,
+                                      episodes=state.stage_episodes)
+        self.progress.recent.extend(state.recent)
+
+    # construction ------------------------------------------------------------------------
+
+    @classmethod
+    def start(cls, config_path: str | Path, overrides: tuple[str, ...] = (), run_dir: Path | None = None,
+              overwrite: bool = False, progress: bool = True) -> "CurriculumTrainer":
+        """Validate the config, create the run folder and a new model at stage 1."""
+        import shutil
+
+        from stable_baselines3.common.logger import configure
+        from stable_baselines3.common.utils import set_random_seed
+
+        config_path = Path(config_path)
+        config = load_run_config(config_path, overrides)
+        if run_dir is None:
+            run_dir = new_run_dir(config, config_path)
+        else:
+            if run_dir.exists() and any(run_dir.iterdir()):
+                if not overwrite:
+                    raise ConfigError(f"{run_dir}: run folder exists and is not empty; use --resume "
+                                      "to continue it or --overwrite to replace it")
+                shutil.rmtree(run_dir)
+            run_dir.mkdir(parents=True, exist_ok=True)
+        # The run folder is self-contained: its config points at its own copy of the curriculum.
+        (run_dir / "curriculum.yaml").write_text(config.curriculum_path.read_text())
+        resolved = {**config.source, "curriculum": "curriculum.yaml", "seed": config.seed}
+        (run_dir / "config.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))
+        (run_dir / "command.txt").write_text(" ".join(sys.argv) + "\n")
+        (run_dir / "versions.json").write_text(json.dumps(_package_versions(), indent=2))
+        set_random_seed(config.seed)
+        import torch
+
+        torch.set_num_threads(config.num_threads)
+        stage = config.curriculum.stages[0]
+        venv = build_vec_env(config, stage)
+        model = build_model(config, venv, run_dir / "tb")
+        model.set_logger(configure(str(run_dir / "tb"), ["tensorboard"]))
+        state = CurriculumState()
+        trainer = cls(config, run_dir, state, model, venv, progress)
+        apply_ppo_settings(model, effective_ppo(config.ppo, config.curriculum, 0))
+        return trainer
+
+    @classmethod
+    def resume(cls, run_dir: str | Path, progress: bool = True) -> "CurriculumTrainer":
+        """Continue a run from its latest complete checkpoint: same stage, counters,
+        optimizer and normalization state, same TensorBoard folder."""
+        import torch
+        from sb3_contrib import RecurrentPPO
+        from stable_baselines3.common.logger import configure
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        run_dir = Path(run_dir)
+        config = load_run_config(run_dir / "config.yaml")
+        checkpoint = latest_checkpoint(run_dir)
+        if checkpoint is None:
+            raise ConfigError(f"{run_dir}: no complete checkpoint to resume from")
+        state = CurriculumState.from_json(checkpoint.state.read_text())
+        if state.status != "running" and state.status != "interrupted":
+            raise ConfigError(f"{run_dir}: the run already ended ({state.status}); nothing to resume")
+        state.status = "running"
+        torch.set_num_threads(config.num_threads)
+        stage = config.curriculum.stages[state.stage_index]
+        venv = VecNormalize.load(str(checkpoint.vecnormalize), build_vec_env(config, stage).venv)
+        venv.training = True
+        model = RecurrentPPO.load(str(checkpoint.model), env=venv, device=config.device)
+        model.set_logger(configure(str(run_dir / "tb"), ["tensorboard"]))
+        _truncate_episode_log(run_dir / EPISODES_FILE, state.num_timesteps)
+        trainer = cls(config, run_dir, state, model, venv, progress)
+        apply_ppo_settings(model, effective_ppo(config.ppo, config.curriculum, state.stage_index))
+        return trainer
+
+    # the loop ----------------------------------------------------------------------------
+
+    @property
+    def stage(self) -> Stage:
+        return self.config.curriculum.stages[self.state.stage_index]
+
+    def run(self) -> CurriculumState:
+        """Train until the curriculum completes or stops, the step budget is spent, or a
+        SIGINT/SIGTERM arrives (then a checkpoint is written and the run can be resumed)."""
+        from tqdm import tqdm
+
+        config, model, state = self.config, self.model, self.state
+        bar = tqdm(total=config.total_steps, initial=model.num_timesteps, unit="step", dynamic_ncols=True,
+                   disable=not self.show_progress, smoothing=0.1,
+                   mininterval=0.5 if sys.stderr.isatty() else 30.0)
+        collector = EpisodeCollector(config.n_envs, state.stage_index, bar)
+        previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+        def request_stop(signum, frame):
+            collector.stop_requested = signal.Signals(signum).name
+            signal.signal(signal.SIGINT, signal.default_int_handler)  # a second Ctrl-C aborts
+
+        for sig in previous:
+            signal.signal(sig, request_stop)
+        rollout = model.n_steps * model.n_envs
+        started, start_steps = time.perf_counter(), model.num_timesteps
+        try:
+            self._announce_stage(bar)
+            while state.status == "running":
+                if model.num_timesteps >= config.total_steps:
+                    state.status = "budget_reached"
+                    break
+                model.learn(total_timesteps=rollout, callback=collector, reset_num_timesteps=False,
+                            log_interval=1)
+                rollout = model.n_steps * model.n_envs
+                self._after_rollout(collector, bar)
+                if collector.stop_requested:
+                    state.status = "interrupted"
+                    bar.write(f"{collector.stop_requested}: saving a checkpoint; continue with "
+                              f"`python train.py --resume {self.run_dir}`")
+                    break
+                rate = (model.num_timesteps - start_steps) / max(time.perf_counter() - started, 1e-9)
+                bar.set_postfix_str(f"stage {state.stage_index + 1}/{len(config.curriculum.stages)} "
+                                    f"{self.stage.name} | {self.stage_metric_text()} | {rate:.0f} steps/s", refresh=False)
+                if model.num_timesteps >= self.next_checkpoint and state.status == "running":
+                    self.save_checkpoint()
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+            bar.close()
+        self.save_checkpoint()
+        if state.status != "interrupted":
+            self.save_final()
+        return state
+
+    def stage_metric_text(self) -> str:
+        rule = self.stage.advance
+        if rule is None:
+            return "no advancement rule"
+        measured = self.progress.measured
+        value = "-" if math.isnan(measured) else f"{measured:.3f}"
+        return f"{rule.metric} {value}/{rule.threshold} over {len(self.progress.recent)}/{rule.window} eps"
+
+    def _announce_stage(self, bar) -> None:
+        bar.write(f"stage {self.state.stage_index + 1}/{len(self.config.curriculum.stages)}: {self.stage.name}")
+
+    def _after_rollout(self, collector: EpisodeCollector, bar) -> None:
+        model, state = self.model, self.state
+        results = collector.pop_results()
+        rule = self.stage.advance
+        metric = rule.metric if rule else "score"
+        window = rule.window if rule else 100
+        self.progress.record((episode_metric(metric, r) for _, r in results), window)
+        self.progress.steps = model.num_timesteps - state.stage_start_step
+        self._log_episodes(results)
+        logger = model.logger
+        for key, value in collector.pop_term_means().items():
+            logger.record(f"reward/{key}", value)
+        if results:
+            episodes = [r for _, r in results]
+            logger.record("rollout/score", float(np.mean([r.score for r in episodes])))
+            logger.record("rollout/effort", float(np.mean([r.effort for r in episodes])))
+            logger.record("rollout/drop_rate", float(np.mean([r.dropped for r in episodes])))
+        logger.record("curriculum/stage_index", state.stage_index)
+        logger.record("curriculum/stage_steps", self.progress.steps)
+        if not math.isnan(self.progress.measured):
+            logger.record("curriculum/measured", self.progress.measured)
+        decision = decide(rule, self.progress)
+        if decision is not Decision.STAY:
+            self._transition(decision, collector, bar)
+        logger.dump(model.num_timesteps)
+        self._sync_state()
+
+    def _transition(self, decision: Decision, collector: EpisodeCollector, bar) -> None:
+        state, model, config = self.state, self.model, self.config
+        stage = self.stage
+        entry = {"stage": stage.name, "stage_index": state.stage_index, "decision": decision.value,
+                 "at_step": model.num_timesteps, "stage_steps": self.progress.steps,
+                 "stage_episodes": self.progress.episodes, "measured": self.progress.measured}
+        state.history.append(entry)
+        state.episodes_per_stage[stage.name] = self.progress.episodes
+        state.steps_per_stage[stage.name] = self.progress.steps
+        verdict = {"passed": "passed", "timed_out": "ended unpassed (max_steps)", "stop": "ended unpassed"}[decision.value]
+        bar.write(f"stage {stage.name} {verdict} at step {model.num_timesteps}: "
+                  f"{self.stage_metric_text()}")
+        model.logger.record("curriculum/transition", state.stage_index + 1)
+        last = state.stage_index + 1 >= len(config.curriculum.stages)
+        if decision is Decision.STOP:
+            state.status = "stopped"
+            return
+        if last:
+            state.status = "completed"
+            bar.write("curriculum completed")
+            return
+        state.stage_index += 1
+        state.stage_start_step = model.num_timesteps
+        self.progress = StageProgress()
+        collector.stage_index = state.stage_index
+        self.venv.env_method("configure", **stage_knobs(self.stage))
+        apply_ppo_settings(model, effective_ppo(config.ppo, config.curriculum, state.stage_index))
+        self._announce_stage(bar)
+
+    def _sync_state(self) -> None:
+        state = self.state
+        state.num_timesteps = int(self.model.num_timesteps)
+        state.stage_episodes = self.progress.episodes
+        state.recent = list(self.progress.recent)
+        name = self.stage.name
+        state.episodes_per_stage[name] = self.progress.episodes
+        state.steps_per_stage[name] = self.progress.steps
+
+    def _log_episodes(self, results: list[tuple[int, EpisodeResult]]) -> None:
+        path = self.run_dir / EPISODES_FILE
+        new = not path.exists()
+        with path.open("a", newline="") as file:
+            writer = csv.writer(file)
+            if new:
+                writer.writerow(EPISODE_COLUMNS)
+            for step, r in results:
+                writer.writerow((step, self.state.stage_index, self.stage.name, f"{r.score:.6g}",
+                                 r.solved_steps, r.length, int(r.dropped), f"{r.effort:.6g}", r.direction))
+
+    # checkpoints -------------------------------------------------------------------------
+
+    def save_checkpoint(self) -> Path:
+        """Write model (with optimizer), normalization statistics and curriculum state of the
+        same step; each file is written under a temporary name and renamed, and the pointer
+        ``latest.json`` last, so a crash leaves the previous checkpoint intact."""
+        self._sync_state()
+        steps = int(self.model.num_timesteps)
+        files = checkpoint_files(self.checkpoint_dir, steps)
+        tmp_model = self.checkpoint_dir / f".tmp_{files.model.name}"
+        self.model.save(tmp_model)
+        os.replace(tmp_model, files.model)
+        tmp_norm = self.checkpoint_dir / f".tmp_{files.vecnormalize.name}"
+        self.venv.save(str(tmp_norm))
+        os.replace(tmp_norm, files.vecnormalize)
+        _atomic_write_text(files.state, self.state.to_json())
+        _atomic_write_text(self.checkpoint_dir / LATEST_FILE, json.dumps({"steps": steps}))
+        _atomic_write_text(self.run_dir / STATE_FILE, self.state.to_json())
+        self.next_checkpoint = (steps // self.config.checkpoint_every + 1) * self.config.checkpoint_every
+        self._prune_checkpoints()
+        return files.model
+
+    def save_final(self) -> None:
+        self.model.save(self.run_dir / "final_model.zip")
+        self.venv.save(str(self.run_dir / "final_vecnormalize.pkl"))
+
+    def _prune_checkpoints(self) -> None:
+        steps = sorted(checkpoint_steps(self.checkpoint_dir))
+        for old in steps[: -self.config.keep_checkpoints]:
+            for path in checkpoint_files(self.checkpoint_dir, old):
+                path.unlink(missing_ok=True)
+
+
+@dataclass(frozen=True)
+class CheckpointFiles:
+    model: Path
+    vecnormalize: Path
+    state: Path
+
+    def __iter__(self):
+        return iter((self.model, self.vecnormalize, self.state))
+
+    def complete(self) -> bool:
+        return all(path.is_file() for path in self)
+
+
+def checkpoint_files(folder: Path, steps: int) -> CheckpointFiles:
+    """SB3's names for a checkpoint's model and statistics, plus our curriculum state."""
+    return CheckpointFiles(folder / f"rl_model_{steps}_steps.zip",
+                           folder / f"rl_model_vecnormalize_{steps}_steps.pkl",
+                           folder / f"curriculum_state_{steps}_steps.json")
+
+
+def checkpoint_steps(folder: Path) -> list[int]:
+    steps = []
+    for path in folder.glob("rl_model_*_steps.zip"):
+        try:
+            steps.append(int(path.name[len("rl_model_"):-len("_steps.zip")]))
+        except ValueError:
+            continue
+    return steps
+
+
+def latest_checkpoint(run_dir: Path) -> CheckpointFiles | None:
+    """The newest checkpoint whose three files all exist."""
+    folder = Path(run_dir) / CHECKPOINT_DIR
+    for steps in sorted(checkpoint_steps(folder), reverse=True):
+        files = checkpoint_files(folder, steps)
+        if files.complete():
+            return files
+    return None
+
+
+def _truncate_episode_log(path: Path, max_step: int) -> None:
+    """Drop episodes logged after the checkpoint a resumed run restarts from."""
+    if not path.exists():
+        return
+    with path.open(newline="") as file:
+        rows = list(csv.reader(file))
+    kept = [rows[0]] + [row for row in rows[1:] if int(row[0]) <= max_step]
+    with path.open("w", newline="") as file:
+        csv.writer(file).writerows(kept)

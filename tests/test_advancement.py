@@ -1,0 +1,83 @@
+"""The advancement rule on synthetic episode results (no simulator)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from curricula.advancement import Decision, StageProgress, decide, episode_metric
+from curricula.schema import AdvanceRule
+from envs.metrics import EpisodeResult
+
+
+def progress(values, steps=10_000, window=4):
+    p = StageProgress(steps=steps)
+    p.record(values, window)
+    return p
+
+
+def test_threshold_needs_a_full_window():
+    rule = AdvanceRule(metric="score", threshold=0.5, window=4)
+    assert decide(rule, progress([0.9, 0.9, 0.9])) is Decision.STAY  # 3 of 4 episodes
+    assert decide(rule, progress([0.9, 0.9, 0.9, 0.2])) is Decision.PASSED  # mean 0.725
+    assert decide(rule, progress([0.5, 0.5, 0.5, 0.5])) is Decision.PASSED  # threshold reached exactly
+    assert decide(rule, progress([0.9, 0.1, 0.3, 0.3])) is Decision.STAY  # mean 0.4
+    assert decide(AdvanceRule(threshold=0.61, window=4), progress([0.9, 0.9, 0.3, 0.3])) is Decision.STAY
+
+
+def test_window_keeps_only_the_most_recent_episodes():
+    p = progress([0.0] * 10 + [1.0] * 4, window=4)
+    assert list(p.recent) == [1.0] * 4 and p.episodes == 14 and p.measured == 1.0
+    assert decide(AdvanceRule(threshold=1.0, window=4), p) is Decision.PASSED
+
+
+def test_min_steps_delays_passing():
+    rule = AdvanceRule(threshold=0.5, window=2, min_steps=5000)
+    assert decide(rule, progress([1, 1], steps=4999)) is Decision.STAY
+    assert decide(rule, progress([1, 1], steps=5000)) is Decision.PASSED
+
+
+def test_max_steps_ends_the_stage_unpassed_or_stops():
+    advance = AdvanceRule(threshold=0.9, window=2, max_steps=1000)
+    stop = AdvanceRule(threshold=0.9, window=2, max_steps=1000, on_max_steps="stop")
+    assert decide(advance, progress([0.1, 0.1], steps=999)) is Decision.STAY
+    assert decide(advance, progress([0.1, 0.1], steps=1000)) is Decision.TIMED_OUT
+    assert decide(stop, progress([0.1, 0.1], steps=1000)) is Decision.STOP
+    # Passing wins over timing out at the same check.
+    assert decide(stop, progress([0.95, 0.95], steps=1000)) is Decision.PASSED
+
+
+def test_stage_without_rule_never_ends():
+    assert decide(None, progress([1.0] * 100, steps=10**9)) is Decision.STAY
+
+
+def test_episode_metrics():
+    held = EpisodeResult(solved_steps=50, length=200, horizon=200, dropped=False, effort=0.1)
+    dropped = EpisodeResult(solved_steps=30, length=40, horizon=200, dropped=True, effort=0.1)
+    assert episode_metric("score", held) == 0.25 and episode_metric("score", dropped) == 0.15
+    assert episode_metric("survival", held) == 1.0 and episode_metric("survival", dropped) == 0.0
+
+
+def simulated_schedule(seed: int, rules: list[AdvanceRule]) -> list[tuple[int, str]]:
+    """Stage transitions of a synthetic run whose episode scores improve with steps."""
+    rng = np.random.default_rng(seed)
+    stage, stage_start, p, schedule = 0, 0, StageProgress(), []
+    for step in range(0, 200_000, 1000):
+        p.steps = step - stage_start
+        skill = min(1.0, p.steps / 50_000)
+        p.record(np.clip(rng.normal(skill * 0.8, 0.1, 3), 0, 1), rules[stage].window)
+        decision = decide(rules[stage], p)
+        if decision is not Decision.STAY:
+            schedule.append((step, decision.value))
+            stage, stage_start, p = stage + 1, step, StageProgress()
+            if stage == len(rules):
+                break
+    return schedule
+
+
+def test_same_seed_same_schedule():
+    rules = [AdvanceRule(threshold=0.3, window=20), AdvanceRule(threshold=0.6, window=20, max_steps=30_000),
+             AdvanceRule(threshold=0.5, window=50)]
+    first = simulated_schedule(7, rules)
+    assert first == simulated_schedule(7, rules)
+    assert [d for _, d in first] == ["passed", "timed_out", "passed"]
+    assert first != simulated_schedule(8, rules)

@@ -1,0 +1,132 @@
+"""Curriculum and run-config validation: every bad input gives one clear error."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from curricula.schema import ConfigError, load_curriculum, load_run_config
+
+REPO = Path(__file__).resolve().parents[1]
+
+GOOD_CURRICULUM = """
+name: tiny
+task: baoding
+defaults: {direction: hold, period: static, rsi_probability: 1.0}
+stages:
+  - name: a
+    env: {solved_radius: 0.03}
+    advance: {metric: score, threshold: 0.1, window: 5}
+  - name: b
+    env: {direction: ccw, period: 20}
+    advance: {metric: survival, threshold: 0.5, window: 5, min_steps: 100, max_steps: 1000, on_max_steps: stop}
+    ppo: {learning_rate: 1e-4, n_steps: 64}
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "c.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_bundled_curricula_and_configs_load():
+    for path in sorted((REPO / "curricula").glob("*.yaml")):
+        curriculum = load_curriculum(path)
+        assert curriculum.stages, path
+    for path in sorted((REPO / "configs").glob("*.yaml")):
+        config = load_run_config(path)
+        assert config.curriculum.stages, path
+
+
+def test_good_curriculum_is_parsed_with_defaults_merged(tmp_path):
+    curriculum = load_curriculum(write(tmp_path, GOOD_CURRICULUM))
+    a, b = curriculum.stages
+    assert a.env == {"direction": "hold", "period": "static", "rsi_probability": 1.0, "solved_radius": 0.03}
+    assert b.env["direction"] == "ccw" and b.env["rsi_probability"] == 1.0
+    assert b.advance.metric == "survival" and b.advance.on_max_steps == "stop"
+    assert b.ppo.learning_rate == 1e-4 and b.ppo.n_steps == 64  # "1e-4" read as a number
+
+
+@pytest.mark.parametrize("old,new,expected", [
+    ("    advance: {metric: score, threshold: 0.1, window: 5}",
+     "    advance: {metric: score, threshold: 1.5, window: 5}",
+     "stages[0].advance.threshold: must be <= 1"),
+    ("    advance: {metric: score, threshold: 0.1, window: 5}",
+     "    advance: {metric: score, threshold: 0.1, windw: 5}",
+     "stages[0].advance.windw: unknown key (did you mean 'window'?); allowed: metric, threshold, window"),
+    ("    advance: {metric: score, threshold: 0.1, window: 5}",
+     "    advance: {metric: succes, threshold: 0.1, window: 5}",
+     "stages[0].advance.metric: 'succes' is not one of score, survival"),
+    ("    advance: {metric: score, threshold: 0.1, window: 5}",
+     "    advance: {metric: score, threshold: high, window: 5}",
+     "stages[0].advance.threshold: expected a number, got 'high'"),
+    ("    advance: {metric: score, threshold: 0.1, window: 5}",
+     "    advance: {metric: score, threshold: 0.1, window: 2.5}",
+     "stages[0].advance.window: expected an integer"),
+    ("    env: {solved_radius: 0.03}", "    env: {solved_radus: 0.03}",
+     "stages[0].env.solved_radus: unknown key (did you mean 'solved_radius'?)"),
+    ("    env: {solved_radius: 0.03}", "    env: {period: [20, 10]}",
+     "stages[0].env: period: range [20.0, 10.0] is reversed"),
+    ("    env: {solved_radius: 0.03}", "    env: {direction: up}",
+     "stages[0].env: direction: 'up' is not one of hold, cw, ccw, random"),
+    ("task: baoding", "task: juggling", "task: 'juggling' is not one of baoding"),
+    ("  - name: b", "  - name: a", "stages[1].name: duplicate stage name 'a'"),
+    ("    ppo: {learning_rate: 1e-4, n_steps: 64}", "    ppo: {lr: 1e-4}",
+     "stages[1].ppo.lr: unknown key; allowed: learning_rate, n_steps, batch_size, clip_range, ent_coef"),
+    ("max_steps: 1000,", "max_steps: 50,", "stages[1].advance.max_steps: 50 is below min_steps 100"),
+])
+def test_bad_curriculum_names_file_key_and_allowed(tmp_path, old, new, expected):
+    assert old in GOOD_CURRICULUM
+    path = write(tmp_path, GOOD_CURRICULUM.replace(old, new))
+    with pytest.raises(ConfigError) as error:
+        load_curriculum(path)
+    message = str(error.value)
+    assert message.startswith(f"{path}: ")
+    assert expected in message
+
+
+def test_missing_and_invalid_files(tmp_path):
+    with pytest.raises(ConfigError, match="curriculum file not found"):
+        load_curriculum(tmp_path / "nope.yaml")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_curriculum(write(tmp_path, "stages: [a, b\n"))
+    with pytest.raises(ConfigError, match="stages: expected a non-empty list"):
+        load_curriculum(write(tmp_path, "name: x\nstages: []\n"))
+    with pytest.raises(ConfigError, match="the curriculum file is empty"):
+        load_curriculum(write(tmp_path, ""))
+
+
+def test_run_config_errors(tmp_path):
+    write(tmp_path, GOOD_CURRICULUM, "cur.yaml")
+    good = "curriculum: cur.yaml\nseed: 3\nn_envs: 2\nppo: {n_steps: 64, batch_size: 64}\n"
+    config = load_run_config(write(tmp_path, good, "run.yaml"))
+    assert config.seed == 3 and config.n_envs == 2 and config.ppo.learning_rate == 2.56e-5
+    cases = {
+        "curriculum: missing.yaml\n": "curriculum: curriculum file not found",
+        good + "n_env: 4\n": "n_env: unknown key (did you mean 'n_envs'?)",
+        good + "vec_env: threads\n": "vec_env: 'threads' is not one of dummy, subproc",
+        good + "policy: {activation: swish}\n": "policy.activation: 'swish' is not one of relu",
+        good + "policy: {net_arch: 256}\n": "policy.net_arch: expected a list of layer sizes",
+        good + "normalize: {observations: yes please}\n": "normalize.observations: expected true or false",
+        "seed: 1\n": "curriculum: missing",
+        good.replace("batch_size: 64", "batch_size: 512"): "ppo.batch_size: 512 exceeds the rollout size",
+        good + "ppo: {gamma: 1.5}\n": "ppo.gamma: must be <= 1",
+    }
+    for text, expected in cases.items():
+        path = write(tmp_path, text, "bad.yaml")
+        with pytest.raises(ConfigError) as error:
+            load_run_config(path)
+        assert str(error.value).startswith(f"{path}: ") and expected in str(error.value), text
+
+
+def test_set_overrides_are_checked_against_the_schema(tmp_path):
+    write(tmp_path, GOOD_CURRICULUM, "cur.yaml")
+    path = write(tmp_path, "curriculum: cur.yaml\nppo: {n_steps: 64, batch_size: 64}\n", "run.yaml")
+    config = load_run_config(path, ("ppo.learning_rate=3e-4", "n_envs=2", "policy.net_arch=[32, 32]"))
+    assert config.ppo.learning_rate == 3e-4 and config.n_envs == 2 and config.policy.net_arch == (32, 32)
+    with pytest.raises(ConfigError, match="ppo.learning_rat: unknown key"):
+        load_run_config(path, ("ppo.learning_rat=3e-4",))
+    with pytest.raises(ConfigError, match="expected key=value"):
+        load_run_config(path, ("ppo.learning_rate",))

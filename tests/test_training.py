@@ -1,0 +1,150 @@
+"""Real (tiny) curriculum training: stage transitions, run folder, checkpoints, interrupt + resume."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from curricula.training import CurriculumState, CurriculumTrainer, checkpoint_files, latest_checkpoint
+
+REPO = Path(__file__).resolve().parents[1]
+
+# Stage 1 is easy: with the balls started on their targets and a 3 cm solved radius, even the
+# untrained policy scores ~0.04 > 0.01. Stage 2 (the official radius, score 0.9) is not passed.
+CURRICULUM = """
+name: two-stage
+task: baoding
+defaults: {direction: hold, period: static, rsi_probability: 1.0, start_angle: uniform}
+stages:
+  - name: easy
+    env: {solved_radius: 0.03}
+    advance: {metric: score, threshold: 0.01, window: 8}
+  - name: hard
+    env: {direction: ccw, period: 20}
+    advance: {metric: score, threshold: 0.9, window: 8}
+    ppo: {learning_rate: 1.0e-4, n_steps: 32, batch_size: 64}
+"""
+
+CONFIG = """
+curriculum: curriculum.yaml
+seed: 5
+n_envs: 2
+total_steps: {total}
+checkpoint_every: 256
+keep_checkpoints: 2
+output_dir: runs
+policy: {{lstm_hidden_size: 16, net_arch: [16], log_std_init: -1.0}}
+ppo: {{learning_rate: 3.0e-4, n_steps: 64, batch_size: 64, n_epochs: 1}}
+"""
+
+
+def write_config(folder: Path, total: int) -> Path:
+    (folder / "curriculum.yaml").write_text(CURRICULUM)
+    path = folder / "run.yaml"
+    path.write_text(CONFIG.format(total=total))
+    return path
+
+
+def test_two_stage_run_advances_and_records_everything(tmp_path):
+    config = write_config(tmp_path, total=2048)
+    trainer = CurriculumTrainer.start(config, run_dir=tmp_path / "run", progress=False)
+    state = trainer.run()
+    run = tmp_path / "run"
+    assert state.status == "budget_reached" and state.num_timesteps >= 2048
+    assert state.stage_index == 1
+    (transition,) = state.history
+    assert transition["stage"] == "easy" and transition["decision"] == "passed"
+    assert transition["measured"] >= 0.01 and transition["stage_episodes"] >= 8
+    saved = CurriculumState.from_json((run / "curriculum_state.json").read_text())
+    assert saved == state
+    assert set(saved.steps_per_stage) == {"easy", "hard"}
+    # Stage 2's PPO overrides took effect, including a rebuilt rollout buffer.
+    model = trainer.model
+    assert model.n_steps == 32 and model.rollout_buffer.buffer_size == 32
+    assert model.batch_size == 64 and model.learning_rate == 1e-4
+    # Every worker env got the stage-2 knobs, in place.
+    assert trainer.venv.get_attr("knobs")[0].direction == "ccw"
+    for name in ("config.yaml", "curriculum.yaml", "command.txt", "versions.json", "episodes.csv",
+                 "final_model.zip", "final_vecnormalize.pkl"):
+        assert (run / name).is_file(), name
+    assert list((run / "tb").glob("events.out.tfevents.*"))
+    rows = (run / "episodes.csv").read_text().splitlines()
+    assert rows[0].startswith("step,stage_index,stage,score") and len(rows) > 8
+    assert {line.split(",")[2] for line in rows[1:]} == {"easy", "hard"}
+    checkpoints = sorted((run / "checkpoints").glob("rl_model_*_steps.zip"))
+    assert len(checkpoints) == 2  # keep_checkpoints
+    assert latest_checkpoint(run).model == checkpoint_files(run / "checkpoints", state.num_timesteps).model
+
+
+def test_crash_mid_write_leaves_previous_checkpoint_loadable(tmp_path):
+    config = write_config(tmp_path, total=512)
+    run = tmp_path / "run"
+    CurriculumTrainer.start(config, run_dir=run, progress=False).run()
+    good = latest_checkpoint(run)
+    # A later checkpoint whose state file never got written (crash between files).
+    partial = checkpoint_files(run / "checkpoints", 99999)
+    partial.model.write_bytes(b"truncated")
+    assert latest_checkpoint(run) == good
+    from sb3_contrib import RecurrentPPO
+
+    assert RecurrentPPO.load(good.model).num_timesteps == int(good.model.name.split("_")[2])
+
+
+def run_train(args: list[str], cwd: Path, **kwargs) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.Popen([sys.executable, str(REPO / "train.py"), *args], cwd=cwd, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kwargs)
+
+
+def test_sigint_saves_and_resume_continues_same_stage_and_counters(tmp_path):
+    config = write_config(tmp_path, total=100_000)
+    run = tmp_path / "run"
+    process = run_train(["--config", str(config), "--run-dir", str(run), "--no-progress"], tmp_path)
+    deadline = time.time() + 240
+    while time.time() < deadline and latest_checkpoint(run) is None:
+        time.sleep(0.5)
+    assert latest_checkpoint(run) is not None, process.communicate()[0]
+    time.sleep(1.0)
+    process.send_signal(signal.SIGINT)
+    output, _ = process.communicate(timeout=120)
+    assert process.returncode == 130, output
+    assert "SIGINT: saving a checkpoint" in output
+    state = json.loads((run / "curriculum_state.json").read_text())
+    assert state["status"] == "interrupted"
+    saved_steps, saved_stage = state["num_timesteps"], state["stage_index"]
+    assert latest_checkpoint(run).model.name == f"rl_model_{saved_steps}_steps.zip"
+    assert not (run / "final_model.zip").exists()
+
+    # Resume with a budget a little beyond the saved step count.
+    config_text = (run / "config.yaml").read_text().replace("total_steps: 100000", f"total_steps: {saved_steps + 512}")
+    (run / "config.yaml").write_text(config_text)
+    resumed = run_train(["--resume", str(run), "--no-progress"], tmp_path)
+    output, _ = resumed.communicate(timeout=300)
+    assert resumed.returncode == 0, output
+    state = json.loads((run / "curriculum_state.json").read_text())
+    assert state["status"] in ("budget_reached", "completed")
+    assert saved_steps + 512 <= state["num_timesteps"] <= saved_steps + 512 + 128
+    assert state["stage_index"] >= saved_stage
+    from sb3_contrib import RecurrentPPO
+
+    model = RecurrentPPO.load(run / "final_model.zip")
+    assert model.num_timesteps == state["num_timesteps"]
+    assert len(list((run / "tb").glob("events.out.tfevents.*"))) == 2  # same folder, one curve
+
+
+def test_bad_config_fails_before_training(tmp_path):
+    (tmp_path / "curriculum.yaml").write_text(CURRICULUM.replace("threshold: 0.01", "threshold: 2"))
+    (tmp_path / "run.yaml").write_text(CONFIG.format(total=100))
+    process = run_train(["--config", str(tmp_path / "run.yaml"), "--run-dir", str(tmp_path / "run")], tmp_path)
+    output, _ = process.communicate(timeout=120)
+    assert process.returncode == 2
+    assert "curriculum.yaml: stages[0].advance.threshold: must be <= 1, got 2" in output
+    assert "Traceback" not in output
+    assert not (tmp_path / "run").exists()

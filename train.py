@@ -1,0 +1,59 @@
+"""Train a recurrent PPO policy through a YAML curriculum.
+
+    python train.py --config configs/quickstart.yaml [--set ppo.learning_rate=3e-4 ...]
+    python train.py --resume runs/quickstart-20261122-101500-s0
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from curricula.schema import ConfigError
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--config", type=Path, help="run config YAML (configs/*.yaml)")
+    source.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue this run from its latest checkpoint")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a config value, e.g. --set n_envs=8 --set ppo.batch_size=256")
+    parser.add_argument("--seed", type=int, help="same as --set seed=N")
+    parser.add_argument("--n-envs", type=int, help="same as --set n_envs=N")
+    parser.add_argument("--total-steps", type=int, help="same as --set total_steps=N")
+    parser.add_argument("--run-dir", type=Path, help="run folder (default: a new one under output_dir)")
+    parser.add_argument("--overwrite", action="store_true", help="replace --run-dir if it exists")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    args = parser.parse_args(argv)
+    for flag, key in (("seed", "seed"), ("n_envs", "n_envs"), ("total_steps", "total_steps")):
+        if getattr(args, flag) is not None:
+            args.overrides.append(f"{key}={getattr(args, flag)}")
+    if args.resume and (args.overrides or args.run_dir):
+        parser.error("--resume continues a run as configured; --set/--seed/--run-dir do not apply")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    from curricula.training import CurriculumTrainer
+
+    try:
+        if args.resume:
+            trainer = CurriculumTrainer.resume(args.resume, progress=not args.no_progress)
+        else:
+            trainer = CurriculumTrainer.start(args.config, tuple(args.overrides), args.run_dir,
+                                              args.overwrite, progress=not args.no_progress)
+    except (ConfigError, FileNotFoundError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    print(f"run folder: {trainer.run_dir}  (seed {trainer.config.seed})")
+    state = trainer.run()
+    print(f"{state.status} at step {state.num_timesteps}, stage {state.stage_index + 1}/"
+          f"{len(trainer.config.curriculum.stages)} ({trainer.stage.name}); run folder: {trainer.run_dir}")
+    return 130 if state.status == "interrupted" else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
