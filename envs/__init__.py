@@ -1,5 +1,10 @@
 """MyoChallenge tasks on the ``mujoco`` bindings; importing registers the gymnasium ids."""
 
+import os
+
+# Headless offscreen rendering by default; mujoco reads this when it is first imported.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
 from gymnasium.envs.registration import register, registry
 
 from envs.baoding import BaodingEnv, BaodingTask

@@ -268,6 +268,8 @@ class BaodingEnv(gym.Env):
         self.task: BaodingTask | None = None
         self._counter = 0
         self._renderer: mujoco.Renderer | None = None
+        for site in self._target_sites:
+            model.site_group[site] = 2  # visible in renders (visual only, as the official env)
 
     # -- distribution -------------------------------------------------------------------
 
@@ -387,13 +389,21 @@ class BaodingEnv(gym.Env):
         return obs, reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
-        """An RGB frame (480 x 640) when ``render_mode == "rgb_array"``."""
+        """An RGB frame (480 x 640) looking down into the palm, when ``render_mode == "rgb_array"``.
+
+        Raises:
+            RuntimeError: when no OpenGL backend is available, naming the packages to install.
+        """
         if self.render_mode != "rgb_array":
             return None
         if self._renderer is None:
-            self._renderer = mujoco.Renderer(self.model, 480, 640)
+            self._renderer = make_renderer(self.model, 480, 640)
+            self._camera = mujoco.MjvCamera()
+            self._camera.azimuth, self._camera.elevation, self._camera.distance = 90.0, -50.0, 0.35
         mujoco.mj_forward(self.model, self.data)  # tendons drawn to the targets need it
-        self._renderer.update_scene(self.data, camera=-1)
+        targets = self.data.site_xpos[list(self._target_sites)]
+        self._camera.lookat[:] = targets.mean(axis=0)
+        self._renderer.update_scene(self.data, self._camera)
         return self._renderer.render()
 
     def close(self) -> None:
@@ -499,6 +509,17 @@ class BaodingEnv(gym.Env):
             "alive": float(not dropped),
             "done": float(dropped),
         }
+
+
+def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
+    """A MuJoCo offscreen renderer, or a clear error saying which system packages provide one."""
+    try:
+        return mujoco.Renderer(model, height, width)
+    except Exception as error:  # mujoco raises several types depending on the backend
+        raise RuntimeError(
+            f"offscreen rendering needs an OpenGL backend ({error}). On Debian/Ubuntu install "
+            "EGL with `apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri` and set MUJOCO_GL=egl "
+            "(the default here), or `apt-get install libosmesa6` and set MUJOCO_GL=osmesa.") from None
 
 
 _INSTABILITY_WARNINGS = (int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),

@@ -1,0 +1,394 @@
+"""Official-metric evaluation of trained checkpoints, on our env and on myosuite's own env.
+
+Episode ``i`` of an evaluation is reset with seed ``seed + i``. Our presets draw task
+instances exactly as the official env does, so the same seeds give the same episodes on
+both; with a deterministic policy the two scores then agree (tests/test_evaluation.py).
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import pickle
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from curricula.training import CHECKPOINT_DIR, EPISODES_FILE, STATE_FILE, checkpoint_files, latest_checkpoint
+from envs import TASKS
+from envs.metrics import EpisodeResult, baoding_score, drop_rate, mean_confidence_interval, mean_effort
+
+OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p2"): "myoChallengeBaodingP2-v1"}
+OBS_SIZES = {"baoding": 86}
+_OFFICIAL_DIRECTIONS = ("hold", "cw", "ccw")  # myosuite's Task enum values 0, 1, 2
+
+
+class EvaluationError(ValueError):
+    """A checkpoint or env that cannot be evaluated; the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class CheckpointRef:
+    """A saved policy and the normalization statistics of the same step."""
+
+    model: Path
+    vecnormalize: Path
+    run_dir: Path | None
+
+    @property
+    def label(self) -> str:
+        return str(self.run_dir.name + "/" + self.model.name if self.run_dir else self.model)
+
+
+@dataclass(frozen=True)
+class EnvChoice:
+    """Which env to evaluate on: a preset or a curriculum stage, ours or the official one."""
+
+    task: str
+    name: str  # "p1", "p2" or "stage:NAME"
+    knobs: dict[str, Any]
+    official: bool = False
+
+    @property
+    def label(self) -> str:
+        return f"{'official' if self.official else 'ours'}:{self.name}"
+
+
+@dataclass
+class EvaluationReport:
+    checkpoint: CheckpointRef
+    env: EnvChoice
+    seed: int
+    episodes: list[EpisodeResult] = field(default_factory=list)
+
+    def summary(self) -> dict[str, Any]:
+        scores = [e.score for e in self.episodes]
+        mean, low, high = mean_confidence_interval(scores)
+        per_direction = {}
+        for direction in sorted({e.direction for e in self.episodes if e.direction}):
+            values = [e.score for e in self.episodes if e.direction == direction]
+            d_mean, d_low, d_high = mean_confidence_interval(values)
+            per_direction[direction] = {"episodes": len(values), "score": d_mean, "ci95": [d_low, d_high]}
+        return {
+            "checkpoint": str(self.checkpoint.model),
+            "run_dir": str(self.checkpoint.run_dir) if self.checkpoint.run_dir else None,
+            "env": self.env.name,
+            "official_env": self.env.official,
+            "seed": self.seed,
+            "episodes": len(self.episodes),
+            "score": baoding_score(self.episodes),
+            "score_ci95": [low, high],
+            "effort": mean_effort(self.episodes),
+            "drop_rate": drop_rate(self.episodes),
+            "mean_length": float(np.mean([e.length for e in self.episodes])) if self.episodes else math.nan,
+            "per_direction": per_direction,
+            "per_episode": [e.to_dict() for e in self.episodes],
+        }
+
+
+# -- finding checkpoints -----------------------------------------------------------------
+
+def _find_run_dir(path: Path) -> Path | None:
+    for folder in (path, path.parent, path.parent.parent):
+        if (folder / "config.yaml").is_file() and (folder / CHECKPOINT_DIR).is_dir():
+            return folder
+    return None
+
+
+def resolve_checkpoint(target: str | Path, checkpoint_steps: int | None = None,
+                       last_checkpoint: bool = False) -> CheckpointRef:
+    """The policy a command-line target names.
+
+    A run folder means its final model (or, with ``last_checkpoint``, its newest checkpoint;
+    with ``checkpoint_steps``, that checkpoint); a ``.zip`` means that file, with the
+    statistics saved beside it under SB3's naming.
+    """
+    path = Path(target)
+    if not path.exists():
+        raise EvaluationError(f"{path}: no such run folder or checkpoint")
+    if path.is_dir():
+        run_dir = _find_run_dir(path)
+        if run_dir is None:
+            raise EvaluationError(f"{path}: not a run folder (no config.yaml and checkpoints/ inside)")
+        folder = run_dir / CHECKPOINT_DIR
+        if checkpoint_steps is not None:
+            files = checkpoint_files(folder, checkpoint_steps)
+            if not files.model.is_file():
+                raise EvaluationError(f"{files.model}: no checkpoint at {checkpoint_steps} steps")
+            return CheckpointRef(files.model, files.vecnormalize, run_dir)
+        final = run_dir / "final_model.zip"
+        if final.is_file() and not last_checkpoint:
+            return CheckpointRef(final, run_dir / "final_vecnormalize.pkl", run_dir)
+        files = latest_checkpoint(run_dir)
+        if files is None:
+            raise EvaluationError(f"{run_dir}: no final model and no complete checkpoint yet")
+        return CheckpointRef(files.model, files.vecnormalize, run_dir)
+    if path.suffix != ".zip":
+        raise EvaluationError(f"{path}: expected a run folder or a model .zip")
+    name = path.name
+    if name.startswith("rl_model_") and name.endswith("_steps.zip"):
+        stats = path.with_name(name.replace("rl_model_", "rl_model_vecnormalize_").replace(".zip", ".pkl"))
+    else:
+        stats = path.with_name(name.replace("model", "vecnormalize").replace(".zip", ".pkl"))
+    return CheckpointRef(path, stats, _find_run_dir(path.parent))
+
+
+@dataclass
+class LoadedPolicy:
+    model: Any
+    normalizer: Any  # VecNormalize with frozen statistics, or None
+
+    def act(self, obs: np.ndarray, state, episode_start: bool):
+        batch = obs[None]
+        if self.normalizer is not None:
+            batch = self.normalizer.normalize_obs(batch)
+        action, state = self.model.predict(batch, state=state, episode_start=np.array([episode_start]),
+                                           deterministic=True)
+        return action[0], state
+
+
+def load_policy(ref: CheckpointRef, task: str) -> LoadedPolicy:
+    """Load a model and its statistics (frozen), checking they fit the task's observation."""
+    from sb3_contrib import RecurrentPPO
+
+    if not ref.model.is_file():
+        raise EvaluationError(f"{ref.model}: checkpoint not found")
+    try:
+        model = RecurrentPPO.load(ref.model, device="cpu")
+    except Exception as error:  # zipfile, pickle and torch errors alike
+        raise EvaluationError(f"{ref.model}: cannot load this checkpoint ({type(error).__name__}: {error}); "
+                              "it is not a complete RecurrentPPO model archive") from None
+    expected = OBS_SIZES[task]
+    shape = model.observation_space.shape
+    if shape != (expected,):
+        raise EvaluationError(f"{ref.model}: the policy takes observations of shape {shape}, but the "
+                              f"{task} env gives ({expected},): it was trained on another task")
+    normalizer = None
+    if ref.vecnormalize.is_file():
+        try:
+            with ref.vecnormalize.open("rb") as file:
+                normalizer = pickle.load(file)
+        except Exception as error:
+            raise EvaluationError(f"{ref.vecnormalize}: cannot read normalization statistics ({error})") from None
+        normalizer.training = False  # evaluation never updates the statistics
+        normalizer.norm_reward = False
+    else:
+        raise EvaluationError(f"{ref.vecnormalize}: normalization statistics of this checkpoint not found "
+                              "(they are saved beside the model under SB3's names)")
+    return LoadedPolicy(model, normalizer)
+
+
+def run_task(ref: CheckpointRef) -> str:
+    """The task a checkpoint was trained on (from its run folder; Baoding otherwise)."""
+    if ref.run_dir is not None:
+        curriculum = yaml.safe_load((ref.run_dir / "curriculum.yaml").read_text())
+        return curriculum.get("task", "baoding")
+    return "baoding"
+
+
+def choose_env(ref: CheckpointRef, name: str, official: bool = False) -> EnvChoice:
+    """Parse ``p1``, ``p2`` or ``stage:NAME`` (a stage of the checkpoint's own curriculum)."""
+    from curricula.schema import load_curriculum
+    from curricula.training import stage_knobs
+
+    task = run_task(ref)
+    if name in ("p1", "p2"):
+        choice = EnvChoice(task, name, {"preset": name}, official)
+    elif name.startswith("stage:"):
+        if official:
+            raise EvaluationError(f"--env {name}: the official env has only the p1 and p2 tasks")
+        if ref.run_dir is None:
+            raise EvaluationError(f"--env {name}: {ref.model} is not inside a run folder, so it has no curriculum")
+        curriculum = load_curriculum(ref.run_dir / "curriculum.yaml")
+        try:
+            stage = curriculum.stages[curriculum.stage_index(name[len("stage:"):])]
+        except KeyError as error:
+            raise EvaluationError(f"--env {name}: {error.args[0]}") from None
+        choice = EnvChoice(task, name, stage_knobs(stage), official)
+    else:
+        raise EvaluationError(f"--env {name!r}: expected p1, p2 or stage:NAME")
+    if official and (task, name) not in OFFICIAL_IDS:
+        raise EvaluationError(f"no official env for {task} {name}")
+    return choice
+
+
+# -- rollouts ----------------------------------------------------------------------------
+
+def _make_env(choice: EnvChoice, render: bool = False):
+    if choice.official:
+        import gymnasium as gym
+
+        try:
+            import myosuite  # noqa: F401  (registers the official ids)
+        except ImportError:
+            raise EvaluationError("--official needs the myosuite package: pip install myosuite==3.0.0") from None
+        return gym.make(OFFICIAL_IDS[(choice.task, choice.name)])
+    return TASKS[choice.task](render_mode="rgb_array" if render else None, **choice.knobs)
+
+
+def _official_direction(env) -> str | None:
+    which = getattr(env.unwrapped, "which_task", None)
+    return _OFFICIAL_DIRECTIONS[which.value] if which is not None else None
+
+
+def run_episode(policy: LoadedPolicy, env, choice: EnvChoice, seed: int, frames: list | None = None) -> EpisodeResult:
+    """One deterministic episode; the LSTM state starts fresh."""
+    obs, _ = env.reset(seed=seed)
+    state, start = None, True
+    solved = length = 0
+    effort = 0.0
+    while True:
+        action, state = policy.act(obs, state, start)
+        start = False
+        obs, _, terminated, truncated, info = env.step(action)
+        if frames is not None:
+            frames.append(env.render())
+        length += 1
+        solved += int(bool(info["solved"]))
+        effort -= float(info["act_reg"])
+        if terminated or truncated:
+            break
+    if not choice.official:
+        return info["episode_result"]
+    horizon = env.spec.max_episode_steps
+    return EpisodeResult(solved_steps=solved, length=length, horizon=horizon, dropped=bool(terminated),
+                         effort=effort / length, direction=_official_direction(env))
+
+
+def _episodes_worker(args: tuple[CheckpointRef, EnvChoice, list[int]]) -> list[EpisodeResult]:
+    import torch
+
+    ref, choice, seeds = args
+    torch.set_num_threads(1)  # the same arithmetic whatever the number of workers
+    policy = load_policy(ref, choice.task)
+    env = _make_env(choice)
+    return [run_episode(policy, env, choice, seed) for seed in seeds]
+
+
+def evaluate(ref: CheckpointRef, choice: EnvChoice, episodes: int, seed: int = 0, workers: int = 1) -> EvaluationReport:
+    """Run ``episodes`` deterministic episodes (seeds ``seed .. seed + episodes - 1``)."""
+    load_policy(ref, choice.task)  # fail early, in this process, with a clear message
+    seeds = [seed + i for i in range(episodes)]
+    workers = max(1, min(workers, episodes))
+    if workers == 1:
+        results = _episodes_worker((ref, choice, seeds))
+    else:
+        chunks = [seeds[i::workers] for i in range(workers)]
+        with multiprocessing.get_context("spawn").Pool(workers) as pool:
+            parts = pool.map(_episodes_worker, [(ref, choice, chunk) for chunk in chunks])
+        by_seed = {s: r for chunk, part in zip(chunks, parts) for s, r in zip(chunk, part)}
+        results = [by_seed[s] for s in seeds]
+    return EvaluationReport(ref, choice, seed, results)
+
+
+def record_video(ref: CheckpointRef, choice: EnvChoice, path: Path, episodes: int = 2, seed: int = 0) -> int:
+    """Render ``episodes`` episodes of our env to an MP4 (40 fps: real time); return the frame count."""
+    import imageio
+
+    policy = load_policy(ref, choice.task)
+    env = _make_env(EnvChoice(choice.task, choice.name, choice.knobs, official=False), render=True)
+    frames: list[np.ndarray] = []
+    for i in range(episodes):
+        run_episode(policy, env, choice, seed + i, frames)
+    env.close()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    imageio.mimwrite(path, frames, fps=env.metadata["render_fps"], codec="libx264", quality=7,
+                     macro_block_size=16)
+    return len(frames)
+
+
+# -- plots -------------------------------------------------------------------------------
+
+def trailing_mean(values: np.ndarray, window: int) -> np.ndarray:
+    """Mean of the last ``window`` values at each point (fewer at the start)."""
+    sums = np.cumsum(np.insert(np.asarray(values, dtype=float), 0, 0.0))
+    index = np.arange(1, len(values) + 1)
+    start = np.maximum(index - window, 0)
+    return (sums[index] - sums[start]) / (index - start)
+
+
+def plot_learning_curve(run_dir: Path, path: Path, window: int = 50) -> None:
+    """Score and survival of training episodes against env steps, stage changes marked."""
+    import csv
+    import json
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    episodes_file = run_dir / EPISODES_FILE
+    if not episodes_file.is_file():
+        raise EvaluationError(f"{run_dir}: no {EPISODES_FILE} to plot a learning curve from")
+    with episodes_file.open(newline="") as file:
+        rows = list(csv.DictReader(file))
+    steps = np.array([int(r["step"]) for r in rows])
+    scores = np.array([float(r["score"]) for r in rows])
+    survival = 1.0 - np.array([int(r["dropped"]) for r in rows])
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    if len(rows):
+        ax.plot(steps, trailing_mean(scores, window), label=f"score (mean of last {window} episodes)")
+        ax.plot(steps, trailing_mean(survival, window), label="no-drop rate", alpha=0.7)
+    state_file = run_dir / STATE_FILE
+    if state_file.is_file():
+        history = json.loads(state_file.read_text()).get("history", [])
+        for entry in history:
+            ax.axvline(entry["at_step"], color="gray", linestyle="--", linewidth=1)
+            ax.text(entry["at_step"], 1.01, f"{entry['stage']} {entry['decision']}", rotation=90,
+                    va="bottom", ha="right", fontsize=7, transform=ax.get_xaxis_transform())
+    ax.set_xlabel("env steps")
+    ax.set_ylabel("training episodes")
+    ax.set_ylim(0, 1)
+    ax.set_title(f"{run_dir.name}: training episodes by stage")
+    ax.legend(loc="upper left")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_score_histogram(reports: Sequence[EvaluationReport], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    bins = np.linspace(0, 1, 21)
+    for report in reports:
+        ax.hist([e.score for e in report.episodes], bins=bins, alpha=0.6,
+                label=f"{report.checkpoint.label} on {report.env.label}")
+    ax.set_xlabel("episode score (solved steps / horizon)")
+    ax.set_ylabel("episodes")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def format_table(reports: Sequence[EvaluationReport]) -> str:
+    """Side-by-side table, one column per (checkpoint, env)."""
+    summaries = [r.summary() for r in reports]
+    columns = [f"{r.checkpoint.label} | {r.env.label}" for r in reports]
+    directions = sorted({d for s in summaries for d in s["per_direction"]})
+    rows = [("episodes", [str(s["episodes"]) for s in summaries]),
+            ("score", [f"{s['score']:.3f} [{s['score_ci95'][0]:.3f}, {s['score_ci95'][1]:.3f}]" for s in summaries]),
+            ("effort", [f"{s['effort']:.4f}" for s in summaries]),
+            ("drop rate", [f"{s['drop_rate']:.3f}" for s in summaries]),
+            ("mean length", [f"{s['mean_length']:.1f}" for s in summaries])]
+    for direction in directions:
+        cells = []
+        for s in summaries:
+            d = s["per_direction"].get(direction)
+            cells.append(f"{d['score']:.3f} (n={d['episodes']})" if d else "-")
+        rows.append((f"score {direction}", cells))
+    width = max(len(name) for name, _ in rows)
+    col_width = [max(len(c), *(len(cells[i]) for _, cells in rows)) for i, c in enumerate(columns)]
+    lines = [" " * width + "  " + "  ".join(c.ljust(w) for c, w in zip(columns, col_width))]
+    lines += [name.ljust(width) + "  " + "  ".join(v.ljust(w) for v, w in zip(cells, col_width)) for name, cells in rows]
+    return "\n".join(lines)

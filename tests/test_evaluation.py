@@ -1,0 +1,149 @@
+"""Evaluation of a checkpoint from a tiny real training: official scores, our env vs the official
+env, JSON, plots, video, and bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from curricula import evaluation as ev
+from curricula.training import CurriculumTrainer
+
+REPO = Path(__file__).resolve().parents[1]
+
+CURRICULUM = """
+name: eval-fixture
+task: baoding
+defaults: {direction: hold, period: static, rsi_probability: 1.0, start_angle: uniform}
+stages:
+  - name: hold
+    advance: {metric: score, threshold: 0.9, window: 8}
+"""
+CONFIG = """
+curriculum: curriculum.yaml
+seed: 1
+n_envs: 2
+total_steps: 1024
+checkpoint_every: 512
+policy: {lstm_hidden_size: 16, net_arch: [16], log_std_init: -1.0}
+ppo: {learning_rate: 3.0e-4, n_steps: 64, batch_size: 64, n_epochs: 1}
+"""
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("eval")
+    (folder / "curriculum.yaml").write_text(CURRICULUM)
+    (folder / "run.yaml").write_text(CONFIG)
+    CurriculumTrainer.start(folder / "run.yaml", run_dir=folder / "run", progress=False).run()
+    return folder / "run"
+
+
+def test_resolve_checkpoint_variants(run_dir):
+    final = ev.resolve_checkpoint(run_dir)
+    assert final.model.name == "final_model.zip" and final.vecnormalize.name == "final_vecnormalize.pkl"
+    last = ev.resolve_checkpoint(run_dir, last_checkpoint=True)
+    assert last.model.name == "rl_model_1024_steps.zip"
+    assert last.vecnormalize.name == "rl_model_vecnormalize_1024_steps.pkl"
+    assert ev.resolve_checkpoint(run_dir, checkpoint_steps=512).model.name == "rl_model_512_steps.zip"
+    direct = ev.resolve_checkpoint(run_dir / "checkpoints" / "rl_model_512_steps.zip")
+    assert direct.run_dir == run_dir and direct.vecnormalize.is_file()
+
+
+def test_evaluation_reports_official_metrics(run_dir):
+    ref = ev.resolve_checkpoint(run_dir)
+    report = ev.evaluate(ref, ev.choose_env(ref, "stage:hold"), episodes=4, seed=3)
+    summary = report.summary()
+    assert summary["episodes"] == 4 and len(summary["per_episode"]) == 4
+    scores = [e["solved_steps"] / 200 for e in summary["per_episode"]]
+    assert summary["score"] == pytest.approx(np.mean(scores))
+    assert summary["drop_rate"] == np.mean([e["dropped"] for e in summary["per_episode"]])
+    assert summary["score_ci95"][0] <= summary["score"] <= summary["score_ci95"][1]
+    assert set(summary["per_direction"]) == {"hold"}
+    # Deterministic: the same seeds give the same numbers, with or without worker processes.
+    again = ev.evaluate(ref, ev.choose_env(ref, "stage:hold"), episodes=4, seed=3, workers=2)
+    assert again.summary()["per_episode"] == summary["per_episode"]
+
+
+@pytest.mark.parametrize("preset", ["p1", "p2"])
+def test_our_env_and_official_env_give_the_same_score(run_dir, preset):
+    pytest.importorskip("myosuite")
+    ref = ev.resolve_checkpoint(run_dir)
+    ours = ev.evaluate(ref, ev.choose_env(ref, preset), episodes=5, seed=10)
+    official = ev.evaluate(ref, ev.choose_env(ref, preset, official=True), episodes=5, seed=10)
+    for a, b in zip(ours.episodes, official.episodes):
+        assert (a.solved_steps, a.length, a.dropped, a.direction) == (b.solved_steps, b.length, b.dropped, b.direction)
+        assert a.effort == pytest.approx(b.effort, rel=1e-9)
+    assert ours.summary()["score"] == official.summary()["score"]
+    assert len({e.direction for e in ours.episodes}) >= (2 if preset == "p2" else 1)
+
+
+def test_cli_writes_json_plots_and_video(run_dir, tmp_path):
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    result = subprocess.run(
+        [sys.executable, str(REPO / "evaluate.py"), str(run_dir), "--env", "p1", "--episodes", "3",
+         "--json", str(out / "e.json"), "--plots", str(out), "--video", str(out / "v.mp4"),
+         "--video-episodes", "2"], capture_output=True, text=True, env=env, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert "score" in result.stdout and "drop rate" in result.stdout
+    data = json.loads((out / "e.json").read_text())
+    (report,) = data["reports"]
+    for key in ("checkpoint", "env", "official_env", "seed", "episodes", "score", "score_ci95", "effort",
+                "drop_rate", "mean_length", "per_direction", "per_episode"):
+        assert key in report, key
+    assert report["env"] == "p1" and report["episodes"] == 3
+    for name in ("score_histogram.png", f"learning_curve_{run_dir.name}.png"):
+        png = (out / name).read_bytes()
+        assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000, name
+    import imageio.v3 as iio
+
+    frames = iio.imread(out / "v.mp4")
+    lengths = [e["length"] for e in report["per_episode"][:2]]  # the video shows episodes seed, seed+1
+    assert frames.shape == (sum(lengths), 480, 640, 3)
+    assert frames.std() > 10  # an actual picture, not a blank frame
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.run([sys.executable, str(REPO / "evaluate.py"), *args], capture_output=True,
+                          text=True, env=env, timeout=300)
+
+
+def test_bad_input_gives_clear_errors(run_dir, tmp_path):
+    missing = run_cli(str(tmp_path / "nothing"))
+    assert missing.returncode == 2 and "no such run folder or checkpoint" in missing.stderr
+    corrupt = tmp_path / "rl_model_5_steps.zip"
+    corrupt.write_bytes(b"not a zip at all")
+    (tmp_path / "rl_model_vecnormalize_5_steps.pkl").write_bytes(b"x")
+    bad = run_cli(str(corrupt))
+    assert bad.returncode == 2 and "cannot load this checkpoint" in bad.stderr
+    unknown_env = run_cli(str(run_dir), "--env", "p3")
+    assert unknown_env.returncode == 2 and "expected p1, p2 or stage:NAME" in unknown_env.stderr
+    unknown_stage = run_cli(str(run_dir), "--env", "stage:spin")
+    assert unknown_stage.returncode == 2 and "no stage named 'spin'" in unknown_stage.stderr
+    for result in (missing, bad, unknown_env, unknown_stage):
+        assert "Traceback" not in result.stderr
+
+
+def test_checkpoint_of_another_task_is_rejected(tmp_path):
+    import pickle
+
+    from sb3_contrib import RecurrentPPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    venv = VecNormalize(make_vec_env("Pendulum-v1", n_envs=1))
+    RecurrentPPO("MlpLstmPolicy", venv, n_steps=8, batch_size=8,
+                 policy_kwargs={"lstm_hidden_size": 8}).save(tmp_path / "rl_model_8_steps.zip")
+    with (tmp_path / "rl_model_vecnormalize_8_steps.pkl").open("wb") as file:
+        pickle.dump(venv, file)
+    result = run_cli(str(tmp_path / "rl_model_8_steps.zip"))
+    assert result.returncode == 2
+    assert "observations of shape (3,)" in result.stderr and "trained on another task" in result.stderr
