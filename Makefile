@@ -19,7 +19,7 @@ setup: $(VENV)/.installed
 
 demo: setup
 	$(PY) train.py --config configs/quickstart.yaml --run-dir $(RUN_DIR) --overwrite
-	$(PY) evaluate.py $(RUN_DIR) --episodes 20 --official --json $(RUN_DIR)/evaluation.json --plots $(RUN_DIR)/plots --video $(RUN_DIR)/episodes.mp4
+	$(PY) evaluate.py $(RUN_DIR) --env stage:hold-wide,p1 --episodes 20 --official --json $(RUN_DIR)/evaluation.json --plots $(RUN_DIR)/plots --video $(RUN_DIR)/episodes.mp4
 
 test: setup
 	$(PY) -m pytest -q

@@ -19,8 +19,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede `i
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("targets", nargs="+", type=Path, metavar="RUN_DIR_OR_CHECKPOINT")
-    parser.add_argument("--env", default="p1", help="p1 (default), p2, or stage:NAME of the run's curriculum")
-    parser.add_argument("--official", action="store_true", help="also evaluate on myosuite's official env")
+    parser.add_argument("--env", default="p1",
+                        help="p1 (default), p2, or stage:NAME of the run's curriculum; several comma-separated")
+    parser.add_argument("--official", action="store_true", help="also evaluate p1/p2 on myosuite's official env")
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--seed", type=int, default=0, help="episode i is reset with seed + i")
     parser.add_argument("--workers", type=int, default=1, help="parallel worker processes for the episodes")
@@ -43,10 +44,15 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         refs = [ev.resolve_checkpoint(t, args.load_checkpoint, args.load_last_checkpoint) for t in args.targets]
+        names = [name.strip() for name in args.env.split(",") if name.strip()]
         choices = []
         for ref in refs:
-            choices.append([ev.choose_env(ref, args.env)] + ([ev.choose_env(ref, args.env, official=True)]
-                                                               if args.official else []))
+            ref_choices = []
+            for name in names:
+                ref_choices.append(ev.choose_env(ref, name))
+                if args.official and not name.startswith("stage:"):
+                    ref_choices.append(ev.choose_env(ref, name, official=True))
+            choices.append(ref_choices)
         reports = []
         for ref, ref_choices in zip(refs, choices):
             for choice in ref_choices:

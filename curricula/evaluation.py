@@ -20,10 +20,10 @@ import yaml
 
 from curricula.training import CHECKPOINT_DIR, EPISODES_FILE, STATE_FILE, checkpoint_files, latest_checkpoint
 from envs import TASKS
-from envs.metrics import EpisodeResult, baoding_score, drop_rate, mean_confidence_interval, mean_effort
+from envs.metrics import EpisodeResult, official_score, drop_rate, mean_confidence_interval, mean_effort
 
-OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p2"): "myoChallengeBaodingP2-v1"}
-OBS_SIZES = {"baoding": 86}
+OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p2"): "myoChallengeBaodingP2-v1",
+                ("die", "p1"): "myoChallengeDieReorientP1-v0", ("die", "p2"): "myoChallengeDieReorientP2-v0"}
 _OFFICIAL_DIRECTIONS = ("hold", "cw", "ccw")  # myosuite's Task enum values 0, 1, 2
 
 
@@ -80,7 +80,7 @@ class EvaluationReport:
             "official_env": self.env.official,
             "seed": self.seed,
             "episodes": len(self.episodes),
-            "score": baoding_score(self.episodes),
+            "score": official_score(self.episodes),
             "score_ci95": [low, high],
             "effort": mean_effort(self.episodes),
             "drop_rate": drop_rate(self.episodes),
@@ -162,7 +162,7 @@ def load_policy(ref: CheckpointRef, task: str) -> LoadedPolicy:
     except Exception as error:  # zipfile, pickle and torch errors alike
         raise EvaluationError(f"{ref.model}: cannot load this checkpoint ({type(error).__name__}: {error}); "
                               "it is not a complete RecurrentPPO model archive") from None
-    expected = OBS_SIZES[task]
+    expected = TASKS[task].OBS_SIZE
     shape = model.observation_space.shape
     if shape != (expected,):
         raise EvaluationError(f"{ref.model}: the policy takes observations of shape {shape}, but the "
@@ -183,10 +183,20 @@ def load_policy(ref: CheckpointRef, task: str) -> LoadedPolicy:
 
 
 def run_task(ref: CheckpointRef) -> str:
-    """The task a checkpoint was trained on (from its run folder; Baoding otherwise)."""
+    """The task a checkpoint was trained on: from its run folder, else from its observation size."""
     if ref.run_dir is not None:
         curriculum = yaml.safe_load((ref.run_dir / "curriculum.yaml").read_text())
         return curriculum.get("task", "baoding")
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    try:
+        data, _, _ = load_from_zip_file(ref.model, load_data=True, device="cpu")
+        shape = data["observation_space"].shape
+    except Exception:  # load_policy reports an unreadable checkpoint with a clear message
+        return "baoding"
+    for name, env_cls in TASKS.items():
+        if shape == (env_cls.OBS_SIZE,):
+            return name
     return "baoding"
 
 
@@ -256,7 +266,7 @@ def run_episode(policy: LoadedPolicy, env, choice: EnvChoice, seed: int, frames:
         return info["episode_result"]
     horizon = env.spec.max_episode_steps
     return EpisodeResult(solved_steps=solved, length=length, horizon=horizon, dropped=bool(terminated),
-                         effort=effort / length, direction=_official_direction(env))
+                         effort=effort / length, direction=_official_direction(env), task=choice.task)
 
 
 def _episodes_worker(args: tuple[CheckpointRef, EnvChoice, list[int]]) -> list[EpisodeResult]:

@@ -169,8 +169,9 @@ class EpisodeCollector(BaseCallback):
     """SB3 callback: gathers finished episodes of the current stage, logs reward terms,
     drives the progress bar, and stops ``learn`` when a stop was requested."""
 
-    def __init__(self, n_envs: int, stage_index: int, progress_bar: Any = None) -> None:
+    def __init__(self, n_envs: int, stage_index: int, terms: tuple[str, ...], progress_bar: Any = None) -> None:
         super().__init__(verbose=0)
+        self.terms = tuple(t for t in terms if t != "done")
         self.stage_index = stage_index
         self.episode_stage = [stage_index] * n_envs  # stage each env's current episode began in
         self.results: list[tuple[int, EpisodeResult]] = []
@@ -182,9 +183,8 @@ class EpisodeCollector(BaseCallback):
     def _on_step(self) -> bool:
         infos, dones = self.locals["infos"], self.locals["dones"]
         for rank, (info, done) in enumerate(zip(infos, dones)):
-            for key in ("pos_dist_1", "pos_dist_2", "act_reg", "solved", "alive"):
-                if key in info:
-                    self.term_sums[key] = self.term_sums.get(key, 0.0) + info[key]
+            for key in self.terms:
+                self.term_sums[key] = self.term_sums.get(key, 0.0) + info.get(key, 0.0)
             if done:
                 result = info.get("episode_result")
                 if result is not None and self.episode_stage[rank] == self.stage_index:
@@ -336,7 +336,8 @@ class CurriculumTrainer:
         bar = tqdm(total=config.total_steps, initial=model.num_timesteps, unit="step", dynamic_ncols=True,
                    disable=not self.show_progress, smoothing=0.1,
                    mininterval=0.5 if sys.stderr.isatty() else 30.0)
-        collector = EpisodeCollector(config.n_envs, state.stage_index, bar)
+        collector = EpisodeCollector(config.n_envs, state.stage_index,
+                                     TASKS[config.curriculum.task].REWARD_TERMS, bar)
         previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
 
         def request_stop(signum, frame):

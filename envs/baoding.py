@@ -23,12 +23,10 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
-import gymnasium as gym
 import mujoco
 import numpy as np
 
-from envs.assets import load_hand_model
-from envs.metrics import EpisodeResult
+from envs.hand_env import MuscleHandEnv, vector_norm
 from envs.knobs import (
     Range,
     check_known,
@@ -215,7 +213,7 @@ def parse_knobs(preset: str = "p1", **knobs: Any) -> BaodingKnobs:
     return replace(BaodingKnobs(), **out)
 
 
-class BaodingEnv(gym.Env):
+class BaodingEnv(MuscleHandEnv):
     """Rotate two balls around each other in the palm of the 39-muscle MyoHand.
 
     Args:
@@ -230,26 +228,26 @@ class BaodingEnv(gym.Env):
     to muscle excitation by ``1 / (1 + exp(-5 (a - 0.5)))``.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 40}
+    MODEL_FILE = MODEL_FILE
+    FRAME_SKIP = FRAME_SKIP
+    HORIZON = HORIZON
+    OBS_SIZE = 86
+    TASK_NAME = "baoding"
     KNOBS = KNOB_HELP
+    REWARD_TERMS = REWARD_TERMS
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 40}
     validate_knobs = staticmethod(parse_knobs)
 
     def __init__(self, preset: str = "p1", render_mode: str | None = None,
                  horizon: int = HORIZON, **knobs: Any) -> None:
-        super().__init__()
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode: {render_mode!r} is not one of None, 'rgb_array'")
-        self.render_mode = render_mode
-        self.horizon = int(horizon)
-        self.model, self._spec = load_hand_model(MODEL_FILE)
-        self.data = mujoco.MjData(self.model)
-        self._scratch = mujoco.MjData(self.model)  # for mj_setConst after ball edits
-        self.dt = self.model.opt.timestep * FRAME_SKIP
+        super().__init__(preset, render_mode, horizon, **knobs)
         model = self.model
         self._ball_bodies = (model.body("ball1").id, model.body("ball2").id)
         self._ball_geoms = (model.geom("ball1").id, model.geom("ball2").id)
         self._ball_sites = (model.site("ball1_site").id, model.site("ball2_site").id)
         self._target_sites = (model.site("target1_site").id, model.site("target2_site").id)
+        for site in self._target_sites:
+            model.site_group[site] = 2  # visible in renders (visual only, as the official env)
         self._nominal_size = float(model.geom_size[self._ball_geoms[0], 0])
         self._nominal_mass = float(model.body_mass[self._ball_bodies[0]])
         self._nominal_friction = tuple(float(v) for v in model.geom_friction[self._ball_geoms[0]])
@@ -260,28 +258,7 @@ class BaodingEnv(gym.Env):
         self._init_qpos = model.qpos0.copy()
         self._init_qpos[:N_HAND_JOINTS] = 0.0
         self._init_qpos[0] = -1.57  # palm up, as the official env
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (model.nu,), np.float32)
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (86,), np.float32)
-        self._obs = np.zeros(86)
-        self.knobs = parse_knobs(preset, **knobs)
-        self.preset = preset
-        self.task: BaodingTask | None = None
-        self._counter = 0
-        self._renderer: mujoco.Renderer | None = None
-        for site in self._target_sites:
-            model.site_group[site] = 2  # visible in renders (visual only, as the official env)
-
-    # -- distribution -------------------------------------------------------------------
-
-    def configure(self, preset: str | None = None, **knobs: Any) -> None:
-        """Replace the task distribution (takes effect at the next reset).
-
-        The result depends only on the arguments (the preset, default the current one,
-        with ``knobs`` over it), so a curriculum can re-send a stage after a restart.
-        """
-        preset = self.preset if preset is None else preset
-        self.knobs = parse_knobs(preset, **knobs)
-        self.preset = preset
+        self._obs = np.zeros(self.OBS_SIZE)
 
     def sample_task(self, rng: np.random.Generator) -> BaodingTask:
         """Draw a task instance from the current knobs (draw order: module docstring)."""
@@ -310,106 +287,25 @@ class BaodingEnv(gym.Env):
             self._nominal_size,) * 2
         return BaodingTask(direction, period, x_radius, y_radius, start, size, mass, friction)
 
-    # -- gymnasium API ------------------------------------------------------------------
+    def task_from_mapping(self, values: Mapping[str, Any]) -> BaodingTask:
+        return BaodingTask.from_mapping(values)
 
-    def reset(self, *, seed: int | None = None,
-              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        """Start an episode.
-
-        Options:
-            task: a :class:`BaodingTask` or a mapping of its fields, pinning the instance.
-            state: mapping with any of ``qpos`` (37), ``qvel`` (35), ``act`` (39), set
-                after the task is applied (no noise or RSI then).
-        """
-        super().reset(seed=seed)
-        options = dict(options or {})
-        check_known("reset option", options, ("task", "state"))
-        model, data, rng = self.model, self.data, self.np_random
-        mujoco.mj_resetData(model, data)
-        data.qpos[:] = self._init_qpos
-        task = options.get("task")
-        if task is None:
-            task = self.sample_task(rng)
-        elif not isinstance(task, BaodingTask):
-            task = BaodingTask.from_mapping(task)
-        self.task = task
+    def _start_episode(self, task: BaodingTask, rng: np.random.Generator,
+                       state: Mapping[str, Any] | None) -> None:
+        self.data.qpos[:] = self._init_qpos
         self._apply_ball_physics(task)
-        self._counter = 0
         self._place_targets(0)
-        if "state" in options:
-            self._set_state(options["state"])
-        else:
+        if state is None:
             self._randomize_start(rng)
-        mujoco.mj_forward(model, data)
-        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "length": 0}
-        obs = self._observe()
-        return obs, {"task": task}
 
-    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        """Apply one 25 ms control step.
-
-        Raises:
-            ValueError: if the action has the wrong shape or a NaN/inf value (the
-                simulation is left untouched).
-        """
-        if self.task is None:
-            raise RuntimeError("call reset() before step()")
-        action = np.asarray(action)
-        if action.shape != (self.model.nu,):
-            raise ValueError(f"action: expected shape ({self.model.nu},), got {action.shape}")
-        if not np.isfinite(action).all():
-            raise ValueError("action: contains NaN or inf; the simulation was not stepped")
-        action = np.clip(action, -1.0, 1.0)
-        model, data = self.model, self.data
+    def _before_physics(self) -> None:
         self._place_targets(self._counter)
-        data.ctrl[:] = 1.0 / (1.0 + np.exp(-5.0 * (action - 0.5)))
-        mujoco.mj_step(model, data, FRAME_SKIP)
-        # Sites after mj_step lag the integrated state by one substep: refresh kinematics
-        # only (all the observation needs) instead of a full mj_forward.
-        mujoco.mj_kinematics(model, data)
-        self._counter += 1
-        unstable = any(data.warning[w].number > 0 for w in _INSTABILITY_WARNINGS)
-        obs = self._observe()
-        terms = self._reward_terms()
-        weights = self.knobs.reward_weights
-        reward = float(np.sum([weight * terms[key] for key, weight in weights.items()]))
-        terminated = bool(terms["done"]) or unstable
-        truncated = not terminated and self._counter >= self.horizon
-        episode = self._episode
-        episode["length"] += 1
-        episode["solved_steps"] += int(terms["solved"])
-        episode["effort_sum"] -= terms["act_reg"]
-        info: dict[str, Any] = {**terms, "dropped": bool(terms["done"]), "unstable": unstable,
-                                "task": self.task}
-        if terminated or truncated:
-            info["episode_result"] = EpisodeResult(
-                solved_steps=episode["solved_steps"], length=episode["length"],
-                horizon=self.horizon, dropped=bool(terms["done"]),
-                effort=episode["effort_sum"] / episode["length"], direction=self.task.direction)
-        return obs, reward, terminated, truncated, info
 
-    def render(self) -> np.ndarray | None:
-        """An RGB frame (480 x 640) looking down into the palm, when ``render_mode == "rgb_array"``.
+    def _episode_label(self) -> str:
+        return self.task.direction
 
-        Raises:
-            RuntimeError: when no OpenGL backend is available, naming the packages to install.
-        """
-        if self.render_mode != "rgb_array":
-            return None
-        if self._renderer is None:
-            self._renderer = make_renderer(self.model, 480, 640)
-            self._camera = mujoco.MjvCamera()
-            self._camera.azimuth, self._camera.elevation, self._camera.distance = 90.0, -50.0, 0.35
-        mujoco.mj_forward(self.model, self.data)  # tendons drawn to the targets need it
-        targets = self.data.site_xpos[list(self._target_sites)]
-        self._camera.lookat[:] = targets.mean(axis=0)
-        self._renderer.update_scene(self.data, self._camera)
-        return self._renderer.render()
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+    def _camera_target(self) -> np.ndarray:
+        return self.data.site_xpos[list(self._target_sites)].mean(axis=0)
 
     # -- internals ----------------------------------------------------------------------
 
@@ -447,7 +343,7 @@ class BaodingEnv(gym.Env):
             node = model.body_bvhadr[body]
             model.bvh_aabb[node] = (0, 0, 0, radius, radius, radius)
         if changed:
-            mujoco.mj_setConst(model, self._scratch)
+            self._refresh_constants()
 
     def _randomize_start(self, rng: np.random.Generator) -> None:
         knobs, qpos = self.knobs, self.data.qpos
@@ -467,16 +363,6 @@ class BaodingEnv(gym.Env):
         for qadr, site in zip(self._ball_qpos, self._target_sites):
             self.data.qpos[qadr:qadr + 3] = self.data.site_xpos[site]
 
-    def _set_state(self, state: Mapping[str, Any]) -> None:
-        check_known("state field", state, ("qpos", "qvel", "act"))
-        data = self.data
-        for key in state:
-            target = getattr(data, key)
-            value = np.asarray(state[key], dtype=float)
-            if value.shape != target.shape:
-                raise ValueError(f"state.{key}: expected shape {target.shape}, got {value.shape}")
-            target[:] = value
-
     def _observe(self) -> np.ndarray:
         data, obs = self.data, self._obs
         (b1, b2), (t1, t2) = self._ball_sites, self._target_sites
@@ -492,35 +378,20 @@ class BaodingEnv(gym.Env):
         obs[41:44] = obs[35:38] - obs[23:26]
         obs[44:47] = obs[38:41] - obs[29:32]
         obs[47:86] = data.act
-        return obs.astype(np.float32)
+        return obs
 
     def _reward_terms(self) -> dict[str, float]:
         obs, knobs = self._obs, self.knobs
-        dist_1 = float(np.linalg.norm(obs[41:44]))
-        dist_2 = float(np.linalg.norm(obs[44:47]))
+        dist_1 = vector_norm(obs[41:44])
+        dist_2 = vector_norm(obs[44:47])
         dropped = obs[25] < knobs.drop_height or obs[31] < knobs.drop_height
         solved = dist_1 < knobs.solved_radius and dist_2 < knobs.solved_radius and not dropped
         return {
             "pos_dist_1": -dist_1,
             "pos_dist_2": -dist_2,
-            "act_reg": -float(np.linalg.norm(obs[47:86])) / self.model.na,
+            "act_reg": -vector_norm(obs[47:86]) / self.model.na,
             "sparse": -(dist_1 + dist_2),
             "solved": float(solved),
             "alive": float(not dropped),
             "done": float(dropped),
         }
-
-
-def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
-    """A MuJoCo offscreen renderer, or a clear error saying which system packages provide one."""
-    try:
-        return mujoco.Renderer(model, height, width)
-    except Exception as error:  # mujoco raises several types depending on the backend
-        raise RuntimeError(
-            f"offscreen rendering needs an OpenGL backend ({error}). On Debian/Ubuntu install "
-            "EGL with `apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri` and set MUJOCO_GL=egl "
-            "(the default here), or `apt-get install libosmesa6` and set MUJOCO_GL=osmesa.") from None
-
-
-_INSTABILITY_WARNINGS = (int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
-                         int(mujoco.mjtWarning.mjWARN_BADQACC))

@@ -1,9 +1,10 @@
 """Official MyoChallenge 2022 metrics, shared by the envs, the training callback and the evaluator.
 
 Baoding (myosuite ``BaodingEnv.get_metrics``): an episode's score is its number of solved
-steps divided by the 200-step horizon, so steps lost to an early drop count as unsolved;
-the score is the mean over episodes. Effort is the mean over episodes of the per-step
-muscle activation norm ``|act| / 39``.
+steps divided by the 200-step horizon, so steps lost to an early drop count as unsolved.
+Die reorientation (``ReorientEnv.get_metrics``): an episode scores 1 when it was solved on
+more than 5 steps, else 0. The score is the mean over episodes. Effort is the mean over
+episodes of the per-step muscle activation norm ``|act| / 39``.
 """
 
 from __future__ import annotations
@@ -13,6 +14,9 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
+
+DIE_SUCCESS_STEPS = 5  # a die episode succeeds when solved on more steps than this
 
 
 @dataclass(frozen=True)
@@ -25,18 +29,26 @@ class EpisodeResult:
     dropped: bool
     effort: float  # mean over the episode's steps of |act| / n_muscles
     direction: str | None = None  # Baoding: hold, cw or ccw
+    task: str = "baoding"
 
     @property
     def score(self) -> float:
-        """Official per-episode Baoding score: solved steps over the full horizon."""
+        """Official per-episode score of the task."""
+        if self.task == "die":
+            return float(self.solved_steps > DIE_SUCCESS_STEPS)
+        return self.solved_steps / self.horizon
+
+    @property
+    def solved_fraction(self) -> float:
+        """Solved steps over the full horizon (Baoding's official score)."""
         return self.solved_steps / self.horizon
 
     def to_dict(self) -> dict:
         return {**asdict(self), "score": self.score}
 
 
-def baoding_score(episodes: Sequence[EpisodeResult]) -> float:
-    """Mean official Baoding score; ``nan`` for no episodes."""
+def official_score(episodes: Sequence[EpisodeResult]) -> float:
+    """Mean official per-episode score; ``nan`` for no episodes."""
     return float(np.mean([e.score for e in episodes])) if episodes else math.nan
 
 

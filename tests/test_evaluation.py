@@ -147,3 +147,20 @@ def test_checkpoint_of_another_task_is_rejected(tmp_path):
     result = run_cli(str(tmp_path / "rl_model_8_steps.zip"))
     assert result.returncode == 2
     assert "observations of shape (3,)" in result.stderr and "trained on another task" in result.stderr
+
+
+def test_die_checkpoint_scores_the_same_on_our_env_and_official(tmp_path):
+    pytest.importorskip("myosuite")
+    (tmp_path / "curriculum.yaml").write_text(
+        "task: die\nstages:\n  - name: p1\n    advance: {threshold: 0.9, window: 8}\n")
+    (tmp_path / "run.yaml").write_text(CONFIG.replace("total_steps: 1024", "total_steps: 256")
+                                       .replace("checkpoint_every: 512", "checkpoint_every: 256"))
+    CurriculumTrainer.start(tmp_path / "run.yaml", run_dir=tmp_path / "run", progress=False).run()
+    ref = ev.resolve_checkpoint(tmp_path / "run")
+    assert ev.run_task(ref) == "die"
+    ours = ev.evaluate(ref, ev.choose_env(ref, "p2"), episodes=4, seed=0)
+    official = ev.evaluate(ref, ev.choose_env(ref, "p2", official=True), episodes=4, seed=0)
+    assert [(e.solved_steps, e.length, e.dropped) for e in ours.episodes] == \
+        [(e.solved_steps, e.length, e.dropped) for e in official.episodes]
+    summary = ours.summary()
+    assert summary["score"] == np.mean([e["solved_steps"] > 5 for e in summary["per_episode"]])

@@ -4,17 +4,17 @@ import math
 
 import pytest
 
-from envs.metrics import EpisodeResult, baoding_score, drop_rate, mean_confidence_interval, mean_effort
+from envs.metrics import EpisodeResult, official_score, drop_rate, mean_confidence_interval, mean_effort
 
 
-def test_baoding_score_counts_steps_lost_to_a_drop_as_unsolved():
+def test_official_score_counts_steps_lost_to_a_drop_as_unsolved():
     full = EpisodeResult(solved_steps=150, length=200, horizon=200, dropped=False, effort=0.2)
     dropped = EpisodeResult(solved_steps=40, length=50, horizon=200, dropped=True, effort=0.4)
     assert full.score == 0.75 and dropped.score == 0.2  # 40 / 200, not 40 / 50
-    assert baoding_score([full, dropped]) == pytest.approx(0.475)
+    assert official_score([full, dropped]) == pytest.approx(0.475)
     assert mean_effort([full, dropped]) == pytest.approx(0.3)
     assert drop_rate([full, dropped]) == 0.5
-    assert math.isnan(baoding_score([]))
+    assert math.isnan(official_score([]))
 
 
 def test_confidence_interval():

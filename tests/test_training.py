@@ -148,3 +148,28 @@ def test_bad_config_fails_before_training(tmp_path):
     assert "curriculum.yaml: stages[0].advance.threshold: must be <= 1, got 2" in output
     assert "Traceback" not in output
     assert not (tmp_path / "run").exists()
+
+
+DIE_CURRICULUM = """
+name: die-two-stage
+task: die
+defaults: {goal_position: 0.0}
+stages:
+  - name: hold-still
+    env: {goal_rotation: 0.0}
+    advance: {metric: score, threshold: 0.5, window: 8}
+  - name: rotate
+    env: {goal_rotation: [-0.5, 0.5]}
+    advance: {metric: score, threshold: 0.99, window: 8}
+"""
+
+
+def test_die_curriculum_advances_a_stage(tmp_path):
+    """The same engine trains the die: the goal on the resting die is solved from step one."""
+    (tmp_path / "curriculum.yaml").write_text(DIE_CURRICULUM)
+    (tmp_path / "run.yaml").write_text(CONFIG.format(total=1024))
+    trainer = CurriculumTrainer.start(tmp_path / "run.yaml", run_dir=tmp_path / "run", progress=False)
+    state = trainer.run()
+    assert state.history and state.history[0]["stage"] == "hold-still"
+    assert state.history[0]["decision"] == "passed" and state.stage_index == 1
+    assert trainer.venv.get_attr("knobs")[0].goal_rotation[0].high == 0.5

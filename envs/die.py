@@ -1,0 +1,263 @@
+"""MyoChallenge 2022 die reorientation on the ``mujoco`` bindings, with curriculum knobs.
+
+Physics, observation, reward, termination and scoring reproduce myosuite's
+``myoChallengeDieReorientP1-v0`` / ``P2-v0`` (tests/test_die_parity.py checks it step by
+step); only the model files are shared with myosuite.
+
+Random draws at reset, in this order (the official order, so the presets give the same task
+instance as the official env for the same seed):
+  1. goal position offset (3), 2. goal orientation (3 Euler angles),
+  3. friction of each of the die's 15 geoms (15 x 3), 4. die mass, 5. die size change;
+  6. hand joint noise (23), only when ``hand_noise > 0``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from envs.hand_env import MuscleHandEnv, vector_norm
+from envs.knobs import Range, check_known, parse_choice, parse_range, parse_weights, to_float
+from envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
+
+MODEL_FILE = "myohand_die.xml"
+HORIZON = 150  # control steps of 10 ms
+FRAME_SKIP = 5
+N_HAND_JOINTS = 23
+REWARD_TERMS = ("pos_dist", "rot_dist", "bonus", "act_reg", "penalty", "sparse", "solved", "done")
+
+
+@dataclass(frozen=True)
+class DieTask:
+    """One task instance: the goal pose and the die's physics for the episode."""
+
+    goal_offset: tuple[float, float, float]  # m, goal position minus its nominal position
+    goal_euler: tuple[float, float, float]  # rad, intrinsic X-Y'-Z'' goal orientation
+    friction: tuple[tuple[float, float, float], ...]  # per die geom (sliding, torsional, rolling)
+    mass: float  # kg
+    size_change: float  # m added to the die's half-sizes
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any]) -> "DieTask":
+        names = list(cls.__dataclass_fields__)
+        check_known("task field", values, names)
+        missing = [n for n in names if n not in values]
+        if missing:
+            raise ValueError(f"task: missing field(s) {', '.join(missing)}")
+        vector = lambda key: tuple(to_float(f"task.{key}[{i}]", v) for i, v in enumerate(values[key]))  # noqa: E731
+        return cls(goal_offset=vector("goal_offset"), goal_euler=vector("goal_euler"),
+                   friction=tuple(tuple(to_float("task.friction", v) for v in row) for row in values["friction"]),
+                   mass=to_float("task.mass", values["mass"]),
+                   size_change=to_float("task.size_change", values["size_change"]))
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class DieKnobs:
+    """The task distribution and episode rules; see :data:`KNOB_HELP`."""
+
+    goal_position: Range = Range(-0.010, 0.010)
+    goal_rotation: tuple[Range, Range, Range] = (Range(-1.57, 1.57),) * 3
+    size_change: float = 0.0
+    mass: Range = Range(0.108, 0.108)
+    friction_change: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    hand_noise: float = 0.0
+    position_threshold: float = 0.025
+    rotation_threshold: float = 0.262
+    drop_threshold: float = 0.200
+    reward_weights: Mapping[str, float] = field(default_factory=lambda: {
+        "pos_dist": 100.0, "rot_dist": 1.0, "bonus": 0.0, "act_reg": 0.0, "penalty": 0.0})
+
+
+KNOB_HELP = {
+    "goal_position": "m, offset of the goal from its nominal position on each axis: a value or [min, max]",
+    "goal_rotation": "rad, goal Euler angles: [min, max] for all axes, or [[min, max] x 3] per axis",
+    "size_change": "m, the die's half-sizes change by U(-value, value)",
+    "mass": "kg, die mass: a value or [min, max]",
+    "friction_change": "[slide, torsion, roll]: friction = nominal +- U(change) per geom",
+    "hand_noise": "rad, uniform +- noise on the 23 hand joints at reset",
+    "position_threshold": "m, solved when the die is closer than this to the goal ...",
+    "rotation_threshold": "rad, ... and its orientation error is below this",
+    "drop_threshold": "m, a die farther than this from the goal is dropped",
+    "reward_weights": f"mapping term -> weight over {', '.join(REWARD_TERMS)}",
+}
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "p1": {},
+    "p2": {"goal_position": [-0.020, 0.020], "goal_rotation": [-3.14, 3.14], "size_change": 0.007,
+           "mass": [0.050, 0.250], "friction_change": [0.2, 0.001, 0.00002]},
+}
+
+
+def parse_knobs(preset: str = "p1", **knobs: Any) -> DieKnobs:
+    """Validated knobs: a preset's values with ``knobs`` overriding them.
+
+    Raises:
+        ValueError: naming an unknown preset or knob (with the allowed ones), or a bad value.
+    """
+    parse_choice("preset", preset, PRESETS)
+    check_known("die knob", knobs, KNOB_HELP)
+    raw = {**PRESETS[preset], **knobs}
+    out: dict[str, Any] = {}
+    if "goal_position" in raw:
+        out["goal_position"] = parse_range("goal_position", raw["goal_position"])
+    if "goal_rotation" in raw:
+        value = raw["goal_rotation"]
+        if isinstance(value, (list, tuple)) and len(value) == 3 and all(isinstance(v, (list, tuple)) for v in value):
+            out["goal_rotation"] = tuple(parse_range(f"goal_rotation[{i}]", v) for i, v in enumerate(value))
+        else:
+            out["goal_rotation"] = (parse_range("goal_rotation", value),) * 3
+    if "size_change" in raw:
+        out["size_change"] = parse_range("size_change", raw["size_change"], minimum=0.0).low
+    if "mass" in raw:
+        out["mass"] = parse_range("mass", raw["mass"], positive=True)
+    if "friction_change" in raw:
+        value = raw["friction_change"]
+        if not isinstance(value, (list, tuple)) or len(value) != 3:
+            raise ValueError(f"friction_change: expected 3 numbers [slide, torsion, roll], got {value!r}")
+        out["friction_change"] = tuple(parse_range(f"friction_change[{i}]", v, minimum=0.0).low
+                                       for i, v in enumerate(value))
+    if "hand_noise" in raw:
+        out["hand_noise"] = parse_range("hand_noise", raw["hand_noise"], minimum=0.0).low
+    for key in ("position_threshold", "rotation_threshold", "drop_threshold"):
+        if key in raw:
+            out[key] = parse_range(key, raw[key], positive=True).low
+    if "reward_weights" in raw:
+        out["reward_weights"] = parse_weights("reward_weights", raw["reward_weights"], REWARD_TERMS)
+    return replace(DieKnobs(), **out)
+
+
+class DieEnv(MuscleHandEnv):
+    """Turn a die in the palm of the 39-muscle MyoHand to a goal position and orientation.
+
+    Args:
+        preset: ``"p1"`` or ``"p2"``, the official phase's task distribution.
+        render_mode: ``None`` or ``"rgb_array"``.
+        horizon: control steps before truncation (official: 150).
+        **knobs: overrides of the preset; see :data:`KNOB_HELP`.
+
+    Observation (102, float32): hand joint angles but the last (22), hand joint velocities
+    times dt (23), die position, goal position, position error, die Euler angles, goal Euler
+    angles, orientation error (3 each), muscle activations (39).
+    """
+
+    MODEL_FILE = MODEL_FILE
+    FRAME_SKIP = FRAME_SKIP
+    HORIZON = HORIZON
+    OBS_SIZE = 102
+    TASK_NAME = "die"
+    KNOBS = KNOB_HELP
+    REWARD_TERMS = REWARD_TERMS
+    ACTION_DTYPE = np.float64
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 100}
+    validate_knobs = staticmethod(parse_knobs)
+
+    def __init__(self, preset: str = "p1", render_mode: str | None = None,
+                 horizon: int = HORIZON, **knobs: Any) -> None:
+        super().__init__(preset, render_mode, horizon, **knobs)
+        model, data = self.model, self.data
+        self._object_site, self._goal_site = model.site("object_o").id, model.site("target_o").id
+        self._goal_body, self._object_body = model.body("target").id, model.body("Object").id
+        self._goal_geom = model.geom("target_dice").id
+        first = int(model.body_geomadr[self._object_body])
+        self._object_geoms = slice(first, first + int(model.body_geomnum[self._object_body]))
+        self._goal_default_size = model.geom_size[self._goal_geom].copy()
+        self._object_default_size = model.geom_size[self._object_geoms].copy()
+        self._object_default_pos = model.geom_pos[self._object_geoms].copy()
+        self._nominal_friction = model.geom_friction[self._object_geoms].copy()
+        self._init_qpos = model.qpos0.copy()
+        self._init_qpos[:-6] = 0.0  # open hand; the die's joints start at 0
+        self._init_qpos[0] = -1.5
+        self._joint_low = model.jnt_range[:N_HAND_JOINTS, 0].copy()
+        self._joint_high = model.jnt_range[:N_HAND_JOINTS, 1].copy()
+        data.qpos[:] = self._init_qpos
+        mujoco.mj_forward(model, data)
+        # Reference frame of the official env: the goal's nominal position, and its offset
+        # from the die at rest (the error is measured relative to that offset).
+        self._goal_init_pos = data.site_xpos[self._goal_site].copy()
+        self._goal_object_offset = data.site_xpos[self._goal_site] - data.site_xpos[self._object_site]
+        self._obs = np.zeros(self.OBS_SIZE)
+        self._applied_physics: tuple[float, float] | None = None
+
+    def sample_task(self, rng: np.random.Generator) -> DieTask:
+        """Draw a task instance from the current knobs (draw order: module docstring)."""
+        k = self.knobs
+        offset = rng.uniform(high=k.goal_position.high, low=k.goal_position.low, size=3)
+        euler = rng.uniform(high=[r.high for r in k.goal_rotation], low=[r.low for r in k.goal_rotation])
+        change = np.asarray(k.friction_change)
+        friction = rng.uniform(low=self._nominal_friction - change, high=self._nominal_friction + change)
+        mass = float(rng.uniform(low=k.mass.low, high=k.mass.high))
+        size_change = float(rng.uniform(low=-k.size_change, high=k.size_change))
+        return DieTask(tuple(offset.tolist()), tuple(euler.tolist()),
+                       tuple(tuple(row) for row in friction.tolist()), mass, size_change)
+
+    def task_from_mapping(self, values: Mapping[str, Any]) -> DieTask:
+        return DieTask.from_mapping(values)
+
+    def _start_episode(self, task: DieTask, rng: np.random.Generator,
+                       state: Mapping[str, Any] | None) -> None:
+        self._apply_task(task)
+        self.data.qpos[:] = self._init_qpos
+        if state is None and self.knobs.hand_noise > 0:
+            noise = self.knobs.hand_noise
+            hand = self.data.qpos[:N_HAND_JOINTS]
+            hand += rng.uniform(-noise, noise, N_HAND_JOINTS)
+            np.clip(hand, self._joint_low, self._joint_high, out=hand)
+
+    def _apply_task(self, task: DieTask) -> None:
+        """Goal pose and die physics into the model, as the official env edits it."""
+        model = self.model
+        model.body_pos[self._goal_body] = self._goal_init_pos + np.asarray(task.goal_offset)
+        model.body_quat[self._goal_body] = euler_to_quat(np.asarray(task.goal_euler))
+        model.geom_friction[self._object_geoms] = task.friction
+        model.body_mass[self._object_body] = task.mass
+        delta = task.size_change
+        model.geom_size[self._goal_geom] = self._goal_default_size + delta
+        sizes = model.geom_size[self._object_geoms]
+        sizes[:-3, 1] = self._object_default_size[:-3, 1] + delta  # edge capsules: half-length
+        sizes[-3:] = self._object_default_size[-3:] + delta  # the three boxes
+        positions = model.geom_pos[self._object_geoms]
+        positions[:] = positions / abs(positions + 1e-16) * (abs(self._object_default_pos) + delta)
+        # Mass and size determine the derived fields; P1 never changes them after the first reset.
+        if self._applied_physics != (task.mass, delta):
+            refresh_bodies(model, self._spec, (self._object_body, self._goal_body), self._scratch)
+            self._applied_physics = (task.mass, delta)
+
+    def _camera_target(self) -> np.ndarray:
+        return self.data.site_xpos[self._object_site]
+
+    def _observe(self) -> np.ndarray:
+        data, obs = self.data, self._obs
+        obs[0:22] = data.qpos[:22]
+        obs[22:45] = data.qvel[:23] * self.dt
+        obs[45:48] = data.site_xpos[self._object_site]
+        obs[48:51] = data.site_xpos[self._goal_site]
+        obs[51:54] = obs[48:51] - obs[45:48] - self._goal_object_offset
+        obs[54:57] = mat_to_euler(data.site_xmat[self._object_site].reshape(3, 3))
+        obs[57:60] = mat_to_euler(data.site_xmat[self._goal_site].reshape(3, 3))
+        obs[60:63] = obs[57:60] - obs[54:57]
+        obs[63:102] = data.act
+        return obs
+
+    def _reward_terms(self) -> dict[str, float]:
+        obs, k = self._obs, self.knobs
+        pos_dist = vector_norm(obs[51:54])
+        rot_dist = vector_norm(obs[60:63])
+        dropped = pos_dist > k.drop_threshold
+        solved = pos_dist < k.position_threshold and rot_dist < k.rotation_threshold and not dropped
+        return {
+            "pos_dist": -pos_dist,
+            "rot_dist": -rot_dist,
+            "bonus": float(pos_dist < 2 * k.position_threshold) + float(pos_dist < k.position_threshold),
+            "act_reg": -vector_norm(obs[63:102]) / self.model.na,
+            "penalty": -float(dropped),
+            "sparse": -rot_dist - 10.0 * pos_dist,
+            "solved": float(solved),
+            "done": float(dropped),
+        }

@@ -1,0 +1,235 @@
+"""What the MyoHand tasks share: model loading, muscle actions, stepping, episode accounting.
+
+A task subclasses :class:`MuscleHandEnv` once and fills in its task instance, observation and
+reward terms; the step/reset skeleton, input checks, instability handling and official
+episode bookkeeping live here, in one place.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from envs.assets import load_hand_model
+from envs.knobs import check_known
+from envs.metrics import EpisodeResult
+
+_INSTABILITY_WARNINGS = np.array([mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+                                  mujoco.mjtWarning.mjWARN_BADQACC], dtype=int)
+
+
+def vector_norm(vector: np.ndarray) -> float:
+    """Euclidean norm of a 1-D float array; the same arithmetic as ``np.linalg.norm``, faster."""
+    return math.sqrt(vector.dot(vector))
+
+
+def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
+    """A MuJoCo offscreen renderer, or a clear error saying which system packages provide one."""
+    try:
+        return mujoco.Renderer(model, height, width)
+    except Exception as error:  # mujoco raises several types depending on the backend
+        raise RuntimeError(
+            f"offscreen rendering needs an OpenGL backend ({error}). On Debian/Ubuntu install "
+            "EGL with `apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri` and set MUJOCO_GL=egl "
+            "(the default here), or `apt-get install libosmesa6` and set MUJOCO_GL=osmesa.") from None
+
+
+class MuscleHandEnv(gym.Env):
+    """Base of the MyoHand tasks. Subclasses set the class constants and implement
+    :meth:`sample_task`, :meth:`task_from_mapping`, :meth:`_start_episode`,
+    :meth:`_observe` and :meth:`_reward_terms` (which must include ``solved`` and ``done``)."""
+
+    MODEL_FILE: ClassVar[str]
+    FRAME_SKIP: ClassVar[int]
+    HORIZON: ClassVar[int]
+    OBS_SIZE: ClassVar[int]
+    TASK_NAME: ClassVar[str]
+    KNOBS: ClassVar[Mapping[str, str]]
+    REWARD_TERMS: ClassVar[tuple[str, ...]]
+    # myosuite's Baoding env maps actions in float32, its die env in float64: keep each one's.
+    ACTION_DTYPE: ClassVar[type | None] = None
+    metadata = {"render_modes": ["rgb_array"]}
+
+    def __init__(self, preset: str = "p1", render_mode: str | None = None,
+                 horizon: int | None = None, **knobs: Any) -> None:
+        super().__init__()
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode: {render_mode!r} is not one of None, 'rgb_array'")
+        self.render_mode = render_mode
+        self.horizon = int(horizon or self.HORIZON)
+        self.knobs = self.validate_knobs(preset, **knobs)
+        self.preset = preset
+        self.model, self._spec = load_hand_model(self.MODEL_FILE)
+        self.data = mujoco.MjData(self.model)
+        self._scratch = mujoco.MjData(self.model)  # for mj_setConst after geometry edits
+        self.dt = self.model.opt.timestep * self.FRAME_SKIP
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (self.model.nu,), np.float32)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (self.OBS_SIZE,), np.float32)
+        self.task: Any = None
+        self._counter = 0
+        self._renderer: mujoco.Renderer | None = None
+        self._camera = mujoco.MjvCamera()
+
+    # -- to implement ---------------------------------------------------------------------
+
+    @staticmethod
+    def validate_knobs(preset: str = "p1", **knobs: Any) -> Any:
+        raise NotImplementedError
+
+    def sample_task(self, rng: np.random.Generator) -> Any:
+        raise NotImplementedError
+
+    def task_from_mapping(self, values: Mapping[str, Any]) -> Any:
+        raise NotImplementedError
+
+    def _start_episode(self, task: Any, rng: np.random.Generator, state: Mapping[str, Any] | None) -> None:
+        """Apply the task to the model and set the initial state (``data`` was just reset)."""
+        raise NotImplementedError
+
+    def _before_physics(self) -> None:
+        """Called each step before the substeps (e.g. to move targets)."""
+
+    def _observe(self) -> np.ndarray:
+        """Fill and return the float64 observation buffer."""
+        raise NotImplementedError
+
+    def _reward_terms(self) -> dict[str, float]:
+        raise NotImplementedError
+
+    def _episode_label(self) -> str | None:
+        """A grouping of episodes in reports (Baoding: the direction)."""
+        return None
+
+    # -- distribution -------------------------------------------------------------------
+
+    def configure(self, preset: str | None = None, **knobs: Any) -> None:
+        """Replace the task distribution (takes effect at the next reset).
+
+        The result depends only on the arguments (the preset, default the current one,
+        with ``knobs`` over it), so a curriculum can re-send a stage after a restart.
+        """
+        preset = self.preset if preset is None else preset
+        self.knobs = self.validate_knobs(preset, **knobs)
+        self.preset = preset
+
+    # -- gymnasium API ------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode.
+
+        Options:
+            task: a task instance or a mapping of its fields, pinning the episode's task.
+            state: mapping with any of ``qpos``, ``qvel``, ``act``, set after the task is
+                applied (no start noise or reference state initialization then).
+        """
+        super().reset(seed=seed)
+        options = dict(options or {})
+        check_known("reset option", options, ("task", "state"))
+        mujoco.mj_resetData(self.model, self.data)
+        task = options.get("task")
+        if task is None:
+            task = self.sample_task(self.np_random)
+        elif isinstance(task, Mapping):
+            task = self.task_from_mapping(task)
+        self.task = task
+        self._counter = 0
+        state = options.get("state")
+        if state is not None:
+            check_known("state field", state, ("qpos", "qvel", "act"))
+        self._start_episode(task, self.np_random, state)
+        if state is not None:
+            self._set_state(state)
+        # The observation needs positions only; mj_step computes everything else itself.
+        mujoco.mj_kinematics(self.model, self.data)
+        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "length": 0}
+        return self._observe().astype(np.float32), {"task": task}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Apply one control step (``FRAME_SKIP`` physics substeps).
+
+        Raises:
+            ValueError: if the action has the wrong shape or a NaN/inf value (the
+                simulation is left untouched).
+        """
+        if self.task is None:
+            raise RuntimeError("call reset() before step()")
+        action = np.asarray(action)
+        if action.shape != (self.model.nu,):
+            raise ValueError(f"action: expected shape ({self.model.nu},), got {action.shape}")
+        if not np.isfinite(action).all():
+            raise ValueError("action: contains NaN or inf; the simulation was not stepped")
+        action = np.clip(action, -1.0, 1.0)
+        if self.ACTION_DTYPE is not None:
+            action = action.astype(self.ACTION_DTYPE)
+        model, data = self.model, self.data
+        self._before_physics()
+        data.ctrl[:] = 1.0 / (1.0 + np.exp(-5.0 * (action - 0.5)))  # official muscle mapping
+        mujoco.mj_step(model, data, self.FRAME_SKIP)
+        # Sites after mj_step lag the integrated state by one substep: refresh kinematics
+        # only (all the observation needs) instead of a full mj_forward.
+        mujoco.mj_kinematics(model, data)
+        self._counter += 1
+        unstable = bool(data.warning.number[_INSTABILITY_WARNINGS].any())
+        obs = self._observe().astype(np.float32)
+        terms = self._reward_terms()
+        reward = 0.0
+        for key, weight in self.knobs.reward_weights.items():  # in order, as the official sum
+            reward += weight * terms[key]
+        terminated = bool(terms["done"]) or unstable
+        truncated = not terminated and self._counter >= self.horizon
+        episode = self._episode
+        episode["length"] += 1
+        episode["solved_steps"] += int(terms["solved"])
+        episode["effort_sum"] -= terms["act_reg"]
+        info: dict[str, Any] = {**terms, "dropped": bool(terms["done"]), "unstable": unstable, "task": self.task}
+        if terminated or truncated:
+            info["episode_result"] = EpisodeResult(
+                solved_steps=episode["solved_steps"], length=episode["length"], horizon=self.horizon,
+                dropped=bool(terms["done"]), effort=episode["effort_sum"] / episode["length"],
+                direction=self._episode_label(), task=self.TASK_NAME)
+        return obs, reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        """An RGB frame (480 x 640) when ``render_mode == "rgb_array"``.
+
+        Raises:
+            RuntimeError: when no OpenGL backend is available, naming the packages to install.
+        """
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            self._renderer = make_renderer(self.model, 480, 640)
+            self._camera.azimuth, self._camera.elevation, self._camera.distance = 90.0, -50.0, 0.35
+        mujoco.mj_forward(self.model, self.data)  # derived quantities drawn (tendons) need it
+        self._camera.lookat[:] = self._camera_target()
+        self._renderer.update_scene(self.data, self._camera)
+        return self._renderer.render()
+
+    def _camera_target(self) -> np.ndarray:
+        return self.data.xpos[self.model.body("trapezium").id]
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # -- helpers ------------------------------------------------------------------------
+
+    def _set_state(self, state: Mapping[str, Any]) -> None:
+        data = self.data
+        for key in state:
+            target = getattr(data, key)
+            value = np.asarray(state[key], dtype=float)
+            if value.shape != target.shape:
+                raise ValueError(f"state.{key}: expected shape {target.shape}, got {value.shape}")
+            target[:] = value
+
+    def _refresh_constants(self) -> None:
+        """Recompute ``mj_setConst`` quantities after mass or geometry edits."""
+        mujoco.mj_setConst(self.model, self._scratch)

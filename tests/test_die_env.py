@@ -1,0 +1,171 @@
+"""Die reorientation env: spaces, determinism, presets, pinned tasks, drops, bad input, and
+step-by-step parity with myosuite's ``myoChallengeDieReorientP1-v0`` / ``P2-v0``."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+import envs  # noqa: F401  (registers the ids)
+from envs.die import DieEnv, DieTask, parse_knobs
+from envs.metrics import EpisodeResult
+from envs.physics import euler_to_quat, mat_to_euler
+
+OFFICIAL = {"p1": "myoChallengeDieReorientP1-v0", "p2": "myoChallengeDieReorientP2-v0"}
+
+
+def test_spaces_and_ids():
+    env = gym.make("myosds/DieP2-v0").unwrapped
+    assert env.preset == "p2" and env.observation_space.shape == (102,)
+    assert env.action_space.shape == (39,) and env.dt == pytest.approx(0.01)
+    obs, info = env.reset(seed=0)
+    assert obs.dtype == np.float32 and isinstance(info["task"], DieTask)
+    obs, reward, *_ , info = env.step(env.action_space.sample())
+    assert reward == pytest.approx(100 * info["pos_dist"] + info["rot_dist"])
+
+
+def test_same_seed_same_episode():
+    a, b = DieEnv("p2"), DieEnv("p2")
+    for env in (a, b):
+        env.reset(seed=3)
+    assert a.task == b.task
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        action = rng.uniform(-1, 1, 39).astype(np.float32)
+        np.testing.assert_array_equal(a.step(action)[0], b.step(action)[0])
+
+
+def test_presets_equal_official_ranges():
+    p1, p2 = parse_knobs("p1"), parse_knobs("p2")
+    assert (p1.goal_position.low, p1.goal_position.high) == (-0.010, 0.010)
+    assert all((r.low, r.high) == (-1.57, 1.57) for r in p1.goal_rotation)
+    assert p1.size_change == 0 and (p1.mass.low, p1.mass.high) == (0.108, 0.108)
+    assert (p2.goal_position.low, p2.goal_position.high) == (-0.020, 0.020)
+    assert all((r.low, r.high) == (-3.14, 3.14) for r in p2.goal_rotation)
+    assert p2.size_change == 0.007 and (p2.mass.low, p2.mass.high) == (0.050, 0.250)
+    assert p2.friction_change == (0.2, 0.001, 0.00002)
+    assert (p1.position_threshold, p1.rotation_threshold, p1.drop_threshold) == (0.025, 0.262, 0.2)
+    assert dict(p1.reward_weights) == {"pos_dist": 100.0, "rot_dist": 1.0, "bonus": 0.0,
+                                       "act_reg": 0.0, "penalty": 0.0}
+
+
+def test_goal_rotation_per_axis_and_pinned_goal():
+    env = DieEnv(goal_rotation=[[0, 0], [0.5, 0.5], [-1, 1]], goal_position=0.0)
+    env.reset(seed=1)
+    assert env.task.goal_euler[:2] == (0.0, 0.5) and -1 <= env.task.goal_euler[2] <= 1
+    assert env.task.goal_offset == (0.0, 0.0, 0.0)
+    task = {**env.task.to_dict(), "goal_euler": [0.3, -0.2, 1.0]}
+    obs, _ = env.reset(seed=2, options={"task": task})
+    np.testing.assert_allclose(obs[57:60], [0.3, -0.2, 1.0], atol=1e-6)  # goal Euler angles observed
+
+
+def test_euler_round_trip():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        euler = rng.uniform(-1.4, 1.4, 3)
+        matrix = np.zeros(9)
+        mujoco.mju_quat2Mat(matrix, euler_to_quat(euler))
+        np.testing.assert_allclose(mat_to_euler(matrix.reshape(3, 3)), euler, atol=1e-9)
+
+
+def test_drop_terminates_and_scores_as_official():
+    env = DieEnv()
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for step in range(150):
+        _, _, terminated, truncated, info = env.step(rng.uniform(-1, 1, 39).astype(np.float32))
+        if terminated or truncated:
+            break
+    assert terminated and info["dropped"] and info["penalty"] == -1.0
+    result = info["episode_result"]
+    assert result.task == "die" and result.length == step + 1 and result.horizon == 150
+    # Official die score: an episode succeeds when solved on more than 5 steps.
+    assert EpisodeResult(6, 150, 150, False, 0.1, task="die").score == 1.0
+    assert EpisodeResult(5, 150, 150, False, 0.1, task="die").score == 0.0
+
+
+@pytest.mark.parametrize("knobs,message", [
+    ({"goal_rotaton": 1}, "did you mean 'goal_rotation'"),
+    ({"goal_rotation": [2, 1]}, "reversed"),
+    ({"mass": 0}, "must be > 0"),
+    ({"size_change": -0.01}, "must be >= 0"),
+    ({"friction_change": [0.1, 0.2]}, "expected 3 numbers"),
+    ({"reward_weights": {"distance": 1}}, "unknown reward term"),
+])
+def test_bad_knobs(knobs, message):
+    with pytest.raises(ValueError, match=message):
+        DieEnv(**knobs)
+
+
+def test_nan_action_rejected():
+    env = DieEnv()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(np.full(39, np.nan, np.float32))
+
+
+# -- parity with the official env ----------------------------------------------------------
+
+def official_env(preset: str, **kwargs):
+    pytest.importorskip("myosuite")
+    return gym.make(OFFICIAL[preset], **kwargs)
+
+
+def compare_episode(ours, official, action_seed: int) -> tuple[int, bool]:
+    rng = np.random.default_rng(action_seed)
+    for step in range(150):
+        action = np.clip(rng.normal(0.0, 0.6, 39), -1.3, 1.3).astype(np.float32)
+        o_obs, o_rew, o_term, o_trunc, o_info = official.step(action)
+        obs, rew, term, trunc, info = ours.step(action)
+        assert np.abs(obs - o_obs).max() <= 1e-6, f"observation differs at step {step}"
+        assert rew == pytest.approx(o_rew, abs=1e-6), f"reward differs at step {step}"
+        assert bool(info["solved"]) == bool(o_info["solved"])
+        assert (term, trunc) == (o_term, o_trunc), f"termination differs at step {step}"
+        if term or trunc:
+            return step + 1, term
+    return 150, False
+
+
+@pytest.mark.parametrize("preset", ["p1", "p2"])
+def test_parity_same_seed(preset):
+    official, ours = official_env(preset), DieEnv(preset)
+    for seed in range(3):
+        o_obs, _ = official.reset(seed=seed)
+        obs, _ = ours.reset(seed=seed)
+        np.testing.assert_array_equal(obs, o_obs)
+        u = official.unwrapped
+        for field in ("body_pos", "body_quat", "body_mass", "body_inertia", "geom_size", "geom_pos",
+                      "geom_friction", "geom_aabb", "geom_rbound", "bvh_aabb", "dof_invweight0"):
+            np.testing.assert_array_equal(getattr(ours.model, field), getattr(u.model, field), err_msg=field)
+        length, terminated = compare_episode(ours, official, action_seed=seed)
+        assert terminated and length > 5
+
+
+@pytest.mark.parametrize("preset", ["p1", "p2"])
+def test_parity_full_episodes_and_pinned_state(preset):
+    official, ours = official_env(preset, drop_th=10.0), DieEnv(preset, drop_threshold=10.0)
+    official.reset(seed=7)
+    ours.reset(seed=7)
+    assert compare_episode(ours, official, action_seed=70) == (150, False)
+    # Pinned: our env given the official env's task instance and a perturbed state.
+    official.reset(seed=8)
+    u = official.unwrapped
+    rng = np.random.default_rng(8)
+    qpos = u.data.qpos.copy()
+    qpos[3:23] += rng.uniform(-0.1, 0.1, 20)
+    qvel = rng.normal(0, 0.05, u.model.nv)
+    u.data.qpos[:], u.data.qvel[:] = qpos, qvel
+    mujoco.mj_forward(u.model, u.data)
+    task = DieTask(goal_offset=tuple(u.model.body_pos[u.goal_bid] - u.goal_init_pos),
+                   goal_euler=tuple(mat_to_euler(u.data.site_xmat[u.goal_sid].reshape(3, 3))),
+                   friction=tuple(map(tuple, u.model.geom_friction[u.object_gid0:u.object_gidn])),
+                   mass=float(u.model.body_mass[u.object_bid]),
+                   size_change=float(u.model.geom_size[u.target_gid, 0] - u.target_default_size[0]))
+    obs, _ = ours.reset(seed=1234, options={"task": task, "state": {"qpos": qpos, "qvel": qvel}})
+    o_obs = u._obs_dict_to_vec(u._get_obs_dict(u._accessor)).astype(np.float32)
+    np.testing.assert_allclose(obs, o_obs, atol=1e-6)
+    compare_episode(ours, official, action_seed=80)
