@@ -89,6 +89,9 @@ class PolicyConfig:
     activation: str = "relu"
     log_std_init: float = -2.0
     ortho_init: bool = True
+    # One LSTM call per sequence in updates (same function, faster); false: sb3-contrib's
+    # step-by-step loop, kept to reproduce the reference setup's speed.
+    fast_lstm_update: bool = True
 
 
 @dataclass(frozen=True)
@@ -121,9 +124,10 @@ class RunConfig:
     curriculum_path: Path
     seed: int = 0
     n_envs: int = 4
-    vec_env: str = "dummy"
+    vec_env: str = "thread"  # thread: envs stepped on a thread pool in this process
+    env_threads: int = 0  # threads stepping envs (vec_env: thread); 0 = one per core
     device: str = "cpu"
-    num_threads: int = 1
+    num_threads: int = 0  # torch threads for the policy; 0 = one per core
     total_steps: int = 1_000_000
     checkpoint_every: int = 50_000  # env steps
     keep_checkpoints: int = 3
@@ -135,7 +139,7 @@ class RunConfig:
 
 
 ACTIVATIONS = ("relu", "tanh", "elu", "leaky_relu")
-VEC_ENVS = ("dummy", "subproc")
+VEC_ENVS = ("thread", "dummy", "subproc")
 
 
 # -- low-level readers -------------------------------------------------------------------
@@ -313,7 +317,7 @@ def load_curriculum(path: str | Path) -> Curriculum:
 
 # -- run config --------------------------------------------------------------------------
 
-RUN_KEYS = ("curriculum", "seed", "n_envs", "vec_env", "device", "num_threads", "total_steps",
+RUN_KEYS = ("curriculum", "seed", "n_envs", "vec_env", "env_threads", "device", "num_threads", "total_steps",
             "checkpoint_every", "keep_checkpoints", "output_dir", "policy", "ppo", "normalize")
 
 
@@ -354,7 +358,7 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     if not curriculum_path.is_file():
         raise reader.error("curriculum", f"curriculum file not found: {curriculum_path}")
     values: dict[str, Any] = {}
-    integer_keys = {"seed": 0, "n_envs": 1, "num_threads": 1, "total_steps": 1,
+    integer_keys = {"seed": 0, "n_envs": 1, "env_threads": 0, "num_threads": 0, "total_steps": 1,
                     "checkpoint_every": 1, "keep_checkpoints": 1}
     for key, low in integer_keys.items():
         if key in raw:

@@ -27,6 +27,7 @@ import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 
 from curricula.advancement import Decision, StageProgress, decide, episode_metric
+from curricula.policy import SequenceLstmPolicy
 from curricula.schema import (
     ConfigError,
     Curriculum,
@@ -42,7 +43,7 @@ STATE_FILE = "curriculum_state.json"
 CHECKPOINT_DIR = "checkpoints"
 LATEST_FILE = "latest.json"
 EPISODES_FILE = "episodes.csv"
-EPISODE_COLUMNS = ("step", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
+EPISODE_COLUMNS = ("step", "wall_s", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
                    "effort", "direction")
 
 
@@ -69,9 +70,16 @@ def build_vec_env(config: RunConfig, stage: Stage):
     """The training VecEnv (``n_envs`` workers, seeded ``seed + rank``) under VecNormalize."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
+    from curricula.vec_env import ThreadVecEnv
+
     knobs = stage_knobs(stage)
     factories = [_make_env(config.curriculum.task, knobs, config.seed + rank) for rank in range(config.n_envs)]
-    venv = SubprocVecEnv(factories) if config.vec_env == "subproc" else DummyVecEnv(factories)
+    if config.vec_env == "subproc":
+        venv = SubprocVecEnv(factories)
+    elif config.vec_env == "thread":
+        venv = ThreadVecEnv(factories, config.env_threads)
+    else:
+        venv = DummyVecEnv(factories)
     venv.seed(config.seed)
     norm = config.normalize
     return VecNormalize(venv, norm_obs=norm.observations, norm_reward=norm.rewards,
@@ -98,7 +106,7 @@ def build_model(config: RunConfig, venv, tensorboard_dir: Path):
         "ortho_init": policy.ortho_init,
     }
     return RecurrentPPO(
-        "MlpLstmPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps,
+        SequenceLstmPolicy if policy.fast_lstm_update else "MlpLstmPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps,
         batch_size=ppo.batch_size, n_epochs=ppo.n_epochs, gamma=ppo.gamma,
         gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range, ent_coef=ppo.ent_coef,
         vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, policy_kwargs=policy_kwargs,
@@ -133,6 +141,32 @@ def apply_ppo_settings(model, settings: dict[str, Any]) -> None:
             gamma=model.gamma, gae_lambda=model.gae_lambda, n_envs=model.n_envs)
 
 
+# -- timing ------------------------------------------------------------------------------
+
+class WallClock:
+    """Wall time spent inside wrapped callables (env stepping, PPO updates)."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+
+    def wrap(self, function: Callable) -> Callable:
+        def timed(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - start
+        return timed
+
+
+@dataclass
+class RolloutTiming:
+    steps: int
+    wall_s: float
+    env_s: float
+    update_s: float
+
+
 # -- curriculum state ---------------------------------------------------------------------
 
 @dataclass
@@ -148,6 +182,7 @@ class CurriculumState:
     history: list[dict[str, Any]] = field(default_factory=list)  # one entry per transition
     status: str = "running"  # running | completed | stopped | budget_reached | interrupted
     num_timesteps: int = 0
+    wall_s: float = 0.0  # training wall time so far, over all sessions of the run
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=2)
@@ -169,8 +204,11 @@ class EpisodeCollector(BaseCallback):
     """SB3 callback: gathers finished episodes of the current stage, logs reward terms,
     drives the progress bar, and stops ``learn`` when a stop was requested."""
 
-    def __init__(self, n_envs: int, stage_index: int, terms: tuple[str, ...], progress_bar: Any = None) -> None:
+    def __init__(self, n_envs: int, stage_index: int, terms: tuple[str, ...], progress_bar: Any = None,
+                 update_threads: int = 1) -> None:
         super().__init__(verbose=0)
+        self.update_threads = update_threads
+        self.rollout_ended_at = time.perf_counter()
         self.terms = tuple(t for t in terms if t != "done")
         self.stage_index = stage_index
         self.episode_stage = [stage_index] * n_envs  # stage each env's current episode began in
@@ -194,6 +232,19 @@ class EpisodeCollector(BaseCallback):
         if self.progress_bar is not None:
             self.progress_bar.update(len(infos))
         return self.stop_requested is None
+
+    def _on_rollout_start(self) -> None:
+        # Env threads need the cores while collecting; torch's idle OpenMP workers would
+        # spin on them. Policy inference on a few dozen observations needs one thread.
+        import torch
+
+        torch.set_num_threads(1)
+
+    def _on_rollout_end(self) -> None:
+        import torch
+
+        self.rollout_ended_at = time.perf_counter()
+        torch.set_num_threads(self.update_threads)
 
     def pop_results(self) -> list[tuple[int, EpisodeResult]]:
         results, self.results = self.results, []
@@ -250,6 +301,14 @@ class CurriculumTrainer:
         self.progress = StageProgress(steps=state.num_timesteps - state.stage_start_step,
                                       episodes=state.stage_episodes)
         self.progress.recent.extend(state.recent)
+        # Where wall time goes: env stepping (timed on the inner VecEnv, which is never
+        # pickled), the PPO update (from the end of the rollout to the end of ``learn``), and
+        # the rest of the rollout: policy inference and bookkeeping.
+        self.env_clock = WallClock()
+        inner = venv.venv
+        inner.step_async = self.env_clock.wrap(inner.step_async)
+        inner.step_wait = self.env_clock.wrap(inner.step_wait)
+        self.timings: list[RolloutTiming] = []
 
     # construction ------------------------------------------------------------------------
 
@@ -282,7 +341,7 @@ class CurriculumTrainer:
         set_random_seed(config.seed)
         import torch
 
-        torch.set_num_threads(config.num_threads)
+        torch.set_num_threads(config.num_threads or os.cpu_count() or 1)
         stage = config.curriculum.stages[0]
         venv = build_vec_env(config, stage)
         model = build_model(config, venv, run_dir / "tb")
@@ -310,7 +369,7 @@ class CurriculumTrainer:
         if state.status != "running" and state.status != "interrupted":
             raise ConfigError(f"{run_dir}: the run already ended ({state.status}); nothing to resume")
         state.status = "running"
-        torch.set_num_threads(config.num_threads)
+        torch.set_num_threads(config.num_threads or os.cpu_count() or 1)
         stage = config.curriculum.stages[state.stage_index]
         venv = VecNormalize.load(str(checkpoint.vecnormalize), build_vec_env(config, stage).venv)
         venv.training = True
@@ -337,7 +396,8 @@ class CurriculumTrainer:
                    disable=not self.show_progress, smoothing=0.1,
                    mininterval=0.5 if sys.stderr.isatty() else 30.0)
         collector = EpisodeCollector(config.n_envs, state.stage_index,
-                                     TASKS[config.curriculum.task].REWARD_TERMS, bar)
+                                     TASKS[config.curriculum.task].REWARD_TERMS, bar,
+                                     update_threads=config.num_threads or os.cpu_count() or 1)
         previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
 
         def request_stop(signum, frame):
@@ -354,8 +414,14 @@ class CurriculumTrainer:
                 if model.num_timesteps >= config.total_steps:
                     state.status = "budget_reached"
                     break
+                steps_before, started_at, env_before = model.num_timesteps, time.perf_counter(), self.env_clock.seconds
                 model.learn(total_timesteps=rollout, callback=collector, reset_num_timesteps=False,
                             log_interval=1)
+                finished_at = time.perf_counter()
+                state.wall_s += finished_at - started_at
+                self.timings.append(RolloutTiming(
+                    model.num_timesteps - steps_before, finished_at - started_at,
+                    self.env_clock.seconds - env_before, max(0.0, finished_at - collector.rollout_ended_at)))
                 rollout = model.n_steps * model.n_envs
                 self._after_rollout(collector, bar)
                 if collector.stop_requested:
@@ -405,6 +471,11 @@ class CurriculumTrainer:
             logger.record("rollout/score", float(np.mean([r.score for r in episodes])))
             logger.record("rollout/effort", float(np.mean([r.effort for r in episodes])))
             logger.record("rollout/drop_rate", float(np.mean([r.dropped for r in episodes])))
+        timing = self.timings[-1] if self.timings else None
+        if timing and timing.wall_s > 0:
+            logger.record("time/env_steps_per_s", timing.steps / timing.wall_s)
+            logger.record("time/env_stepping_share", timing.env_s / timing.wall_s)
+            logger.record("time/update_share", timing.update_s / timing.wall_s)
         logger.record("curriculum/stage_index", state.stage_index)
         logger.record("curriculum/stage_steps", self.progress.steps)
         if not math.isnan(self.progress.measured):
@@ -461,7 +532,7 @@ class CurriculumTrainer:
             if new:
                 writer.writerow(EPISODE_COLUMNS)
             for step, r in results:
-                writer.writerow((step, self.state.stage_index, self.stage.name, f"{r.score:.6g}",
+                writer.writerow((step, f"{self.state.wall_s:.2f}", self.state.stage_index, self.stage.name, f"{r.score:.6g}",
                                  r.solved_steps, r.length, int(r.dropped), f"{r.effort:.6g}", r.direction))
 
     # checkpoints -------------------------------------------------------------------------

@@ -76,8 +76,8 @@ def test_two_stage_run_advances_and_records_everything(tmp_path):
         assert (run / name).is_file(), name
     assert list((run / "tb").glob("events.out.tfevents.*"))
     rows = (run / "episodes.csv").read_text().splitlines()
-    assert rows[0].startswith("step,stage_index,stage,score") and len(rows) > 8
-    assert {line.split(",")[2] for line in rows[1:]} == {"easy", "hard"}
+    assert rows[0].startswith("step,wall_s,stage_index,stage,score") and len(rows) > 8
+    assert {line.split(",")[3] for line in rows[1:]} == {"easy", "hard"}
     checkpoints = sorted((run / "checkpoints").glob("rl_model_*_steps.zip"))
     assert len(checkpoints) == 2  # keep_checkpoints
     assert latest_checkpoint(run).model == checkpoint_files(run / "checkpoints", state.num_timesteps).model

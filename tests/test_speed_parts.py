@@ -1,0 +1,79 @@
+"""The speed-ups change nothing but speed: the whole-sequence LSTM update computes what
+sb3-contrib's step-by-step loop computes, and ThreadVecEnv behaves like DummyVecEnv."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch as th
+from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from curricula.policy import SequenceLstmPolicy
+from curricula.vec_env import ThreadVecEnv
+from envs.baoding import BaodingEnv
+
+
+@pytest.mark.parametrize("starts_inside", [False, True])
+def test_sequence_fast_path_matches_step_by_step(starts_inside):
+    th.manual_seed(0)
+    lstm = th.nn.LSTM(5, 8)
+    n_seq, length = 6, 9
+    features = th.randn(n_seq * length, 5)
+    states = (th.randn(1, n_seq, 8), th.randn(1, n_seq, 8))
+    starts = th.zeros(n_seq, length)
+    starts[[0, 2, 5], 0] = 1.0  # sequences that begin an episode
+    if starts_inside:
+        starts[1, 4] = 1.0  # a reset mid-sequence: the fallback loop must handle it
+    stock_out, stock_states = RecurrentActorCriticPolicy._process_sequence(features, states, starts.flatten(), lstm)
+    fast_out, fast_states = SequenceLstmPolicy._process_sequence(features, states, starts.flatten(), lstm)
+    th.testing.assert_close(fast_out, stock_out, rtol=1e-5, atol=1e-6)
+    th.testing.assert_close(fast_states[0], stock_states[0], rtol=1e-5, atol=1e-6)
+    th.testing.assert_close(fast_states[1], stock_states[1], rtol=1e-5, atol=1e-6)
+
+
+def test_fast_policy_gives_the_same_losses_on_a_real_rollout():
+    from sb3_contrib import RecurrentPPO
+
+    def make():
+        return DummyVecEnv([lambda: BaodingEnv(rsi_probability=1.0, direction="hold", period="static")] * 2)
+
+    kwargs = {"lstm_hidden_size": 16, "net_arch": [16]}
+    stock = RecurrentPPO("MlpLstmPolicy", make(), n_steps=64, batch_size=64, seed=3, policy_kwargs=kwargs)
+    fast = RecurrentPPO(SequenceLstmPolicy, make(), n_steps=64, batch_size=64, seed=3, policy_kwargs=kwargs)
+    fast.policy.load_state_dict(stock.policy.state_dict())
+    stock.learn(128)  # fills the buffer with sequences that start episodes
+    batch = next(stock.rollout_buffer.get(128))
+    assert batch.episode_starts.sum() > 2
+    with th.no_grad():
+        args = (batch.observations, batch.actions, batch.lstm_states, batch.episode_starts)
+        fast.policy.load_state_dict(stock.policy.state_dict())
+        values, log_prob, entropy = stock.policy.evaluate_actions(*args)
+        f_values, f_log_prob, f_entropy = fast.policy.evaluate_actions(*args)
+    th.testing.assert_close(f_values, values, rtol=1e-5, atol=1e-5)
+    th.testing.assert_close(f_log_prob, log_prob, rtol=1e-5, atol=1e-5)
+
+
+def test_thread_vec_env_equals_dummy_vec_env():
+    factories = [lambda: BaodingEnv("p2") for _ in range(5)]
+    threaded, dummy = ThreadVecEnv(factories, n_threads=2), DummyVecEnv(factories)
+    for venv in (threaded, dummy):
+        venv.seed(11)
+    np.testing.assert_array_equal(threaded.reset(), dummy.reset())
+    rng = np.random.default_rng(0)
+    ends = 0
+    for _ in range(60):
+        actions = rng.uniform(-1, 1, (5, 39)).astype(np.float32)
+        t_obs, t_rew, t_done, t_info = threaded.step(actions)
+        d_obs, d_rew, d_done, d_info = dummy.step(actions)
+        np.testing.assert_array_equal(t_obs, d_obs)
+        np.testing.assert_array_equal(t_rew, d_rew)
+        np.testing.assert_array_equal(t_done, d_done)
+        for a, b, done in zip(t_info, d_info, t_done):
+            assert a["TimeLimit.truncated"] == b["TimeLimit.truncated"]
+            if done:
+                ends += 1
+                np.testing.assert_array_equal(a["terminal_observation"], b["terminal_observation"])
+                assert a["episode_result"] == b["episode_result"]
+    assert ends >= 5  # auto-reset was exercised
+    threaded.close()
