@@ -29,27 +29,14 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 
-class _Timer:
-    """Accumulates wall time spent in wrapped callables."""
-
-    def __init__(self) -> None:
-        self.seconds = 0.0
-
-    def wrap(self, function):
-        def timed(*args, **kwargs):
-            start = time.perf_counter()
-            try:
-                return function(*args, **kwargs)
-            finally:
-                self.seconds += time.perf_counter() - start
-        return timed
-
-
 def _timed_learn(model, venv_inner, steps: int) -> dict[str, float]:
-    """Run ``learn`` for ``steps`` env steps (after one warm-up rollout) and split its time."""
+    """Run the reference's plain ``learn`` for ``steps`` env steps (after one warm-up rollout)
+    and split its time; the model is not saved, so its ``train`` can be wrapped."""
+    from curricula.training import WallClock
+
     rollout = model.n_steps * model.n_envs
     model.learn(rollout, reset_num_timesteps=False)  # warm-up: process start, first allocations
-    env_timer, update_timer = _Timer(), _Timer()
+    env_timer, update_timer = WallClock(), WallClock()
     venv_inner.step_wait = env_timer.wrap(venv_inner.step_wait)
     venv_inner.step_async = env_timer.wrap(venv_inner.step_async)
     model.train = update_timer.wrap(model.train)
