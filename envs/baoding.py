@@ -29,6 +29,7 @@ import numpy as np
 from envs.hand_env import MuscleHandEnv, vector_norm
 from envs.knobs import (
     Range,
+    check_complete,
     check_known,
     parse_choice,
     parse_probability,
@@ -74,11 +75,7 @@ class BaodingTask:
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> "BaodingTask":
         """Build and check a task from a mapping with exactly this class's fields."""
-        names = [f for f in cls.__dataclass_fields__]
-        check_known("task field", values, names)
-        missing = [n for n in names if n not in values]
-        if missing:
-            raise ValueError(f"task: missing field(s) {', '.join(missing)}")
+        check_complete("task", values, cls.__dataclass_fields__)
         period = values["period"]
         period = math.inf if period in ("static", math.inf) else to_float("task.period", period)
         if period <= 0:

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from envs.hand_env import MuscleHandEnv, vector_norm
-from envs.knobs import Range, check_known, parse_choice, parse_range, parse_weights, to_float
+from envs.knobs import Range, check_complete, check_known, parse_choice, parse_range, parse_weights, to_float
 from envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
 
 MODEL_FILE = "myohand_die.xml"
@@ -43,11 +43,7 @@ class DieTask:
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> "DieTask":
-        names = list(cls.__dataclass_fields__)
-        check_known("task field", values, names)
-        missing = [n for n in names if n not in values]
-        if missing:
-            raise ValueError(f"task: missing field(s) {', '.join(missing)}")
+        check_complete("task", values, cls.__dataclass_fields__)
         vector = lambda key: tuple(to_float(f"task.{key}[{i}]", v) for i, v in enumerate(values[key]))  # noqa: E731
         return cls(goal_offset=vector("goal_offset"), goal_euler=vector("goal_euler"),
                    friction=tuple(tuple(to_float("task.friction", v) for v in row) for row in values["friction"]),

@@ -123,6 +123,15 @@ def check_known(kind: str, given: Mapping[str, Any], allowed: Iterable[str]) -> 
         raise ValueError(f"unknown {kind} {', '.join(hints)}; allowed: {', '.join(allowed)}")
 
 
+def check_complete(kind: str, given: Mapping[str, Any], names: Iterable[str]) -> None:
+    """Every field of a ``kind`` record (e.g. a task instance) given, and nothing else."""
+    names = list(names)
+    check_known(f"{kind} field", given, names)
+    missing = [name for name in names if name not in given]
+    if missing:
+        raise ValueError(f"{kind}: missing field(s) {', '.join(missing)}")
+
+
 def parse_weights(name: str, weights: Mapping[str, Any], terms: Iterable[str]) -> dict[str, float]:
     """Reward weights keyed by term name; unknown terms are an error."""
     if not isinstance(weights, Mapping):

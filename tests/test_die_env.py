@@ -3,7 +3,6 @@ step-by-step parity with myosuite's ``myoChallengeDieReorientP1-v0`` / ``P2-v0``
 
 from __future__ import annotations
 
-import math
 
 import gymnasium as gym
 import mujoco

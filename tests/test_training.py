@@ -10,7 +10,6 @@ import sys
 import time
 from pathlib import Path
 
-import pytest
 
 from curricula.training import CurriculumState, CurriculumTrainer, checkpoint_files, latest_checkpoint
 
