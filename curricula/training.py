@@ -88,7 +88,7 @@ def build_vec_env(config: RunConfig, stage: Stage):
 
 # -- model -------------------------------------------------------------------------------
 
-def build_model(config: RunConfig, venv, tensorboard_dir: Path):
+def build_model(config: RunConfig, venv):
     import torch
     from sb3_contrib import RecurrentPPO
 
@@ -208,7 +208,7 @@ class EpisodeCollector(BaseCallback):
                  update_threads: int = 1) -> None:
         super().__init__(verbose=0)
         self.update_threads = update_threads
-        self.rollout_ended_at = time.perf_counter()
+        self.rollout_ended_at: float | None = None  # None while a rollout is being collected
         self.terms = tuple(t for t in terms if t != "done")
         self.stage_index = stage_index
         self.episode_stage = [stage_index] * n_envs  # stage each env's current episode began in
@@ -239,6 +239,7 @@ class EpisodeCollector(BaseCallback):
         import torch
 
         torch.set_num_threads(1)
+        self.rollout_ended_at = None
 
     def _on_rollout_end(self) -> None:
         import torch
@@ -344,7 +345,7 @@ class CurriculumTrainer:
         torch.set_num_threads(config.num_threads or os.cpu_count() or 1)
         stage = config.curriculum.stages[0]
         venv = build_vec_env(config, stage)
-        model = build_model(config, venv, run_dir / "tb")
+        model = build_model(config, venv)
         model.set_logger(configure(str(run_dir / "tb"), ["tensorboard"]))
         state = CurriculumState()
         trainer = cls(config, run_dir, state, model, venv, progress)
@@ -419,9 +420,10 @@ class CurriculumTrainer:
                             log_interval=1)
                 finished_at = time.perf_counter()
                 state.wall_s += finished_at - started_at
+                ended = collector.rollout_ended_at  # None: a stop cut the rollout, no update ran
                 self.timings.append(RolloutTiming(
                     model.num_timesteps - steps_before, finished_at - started_at,
-                    self.env_clock.seconds - env_before, max(0.0, finished_at - collector.rollout_ended_at)))
+                    self.env_clock.seconds - env_before, finished_at - ended if ended else 0.0))
                 rollout = model.n_steps * model.n_envs
                 self._after_rollout(collector, bar)
                 if collector.stop_requested:
