@@ -348,13 +348,14 @@ def plot_learning_curve(run_dir: Path, path: Path, window: int = 50) -> None:
         history = json.loads(state_file.read_text()).get("history", [])
         for entry in history:
             ax.axvline(entry["at_step"], color="gray", linestyle="--", linewidth=1)
-            ax.text(entry["at_step"], 1.01, f"{entry['stage']} {entry['decision']}", rotation=90,
-                    va="bottom", ha="right", fontsize=7, transform=ax.get_xaxis_transform())
+            ax.text(entry["at_step"], 0.98, f" {entry['stage']} {entry['decision']}", rotation=90,
+                    va="top", ha="right", fontsize=7, transform=ax.get_xaxis_transform())
     ax.set_xlabel("env steps")
     ax.set_ylabel("training episodes")
-    ax.set_ylim(0, 1)
+    top = max([0.1] + [float(v) for v in (scores.max() if len(rows) else 0, survival.max() if len(rows) else 0)])
+    ax.set_ylim(0, min(1.0, 1.25 * top))  # low early scores stay readable
     ax.set_title(f"{run_dir.name}: training episodes by stage")
-    ax.legend(loc="upper left")
+    ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
