@@ -378,4 +378,11 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     if config.ppo.batch_size > rollout:
         raise reader.error("ppo.batch_size", f"{config.ppo.batch_size} exceeds the rollout size "
                            f"n_steps x n_envs = {rollout}")
+    n_steps, batch_size = config.ppo.n_steps, config.ppo.batch_size
+    for index, stage in enumerate(curriculum.stages):  # overrides stay in force until changed
+        n_steps = stage.ppo.n_steps or n_steps
+        batch_size = stage.ppo.batch_size or batch_size
+        if batch_size > n_steps * config.n_envs:
+            raise ConfigError(f"{curriculum_path}: stages[{index}].ppo: batch_size {batch_size} exceeds the "
+                              f"rollout size n_steps x n_envs = {n_steps} x {config.n_envs} of this run ({path})")
     return config

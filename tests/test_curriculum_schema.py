@@ -121,6 +121,14 @@ def test_run_config_errors(tmp_path):
         assert str(error.value).startswith(f"{path}: ") and expected in str(error.value), text
 
 
+def test_stage_batch_size_is_checked_against_the_run(tmp_path):
+    write(tmp_path, GOOD_CURRICULUM.replace("n_steps: 64}", "n_steps: 64, batch_size: 256}"), "cur.yaml")
+    path = write(tmp_path, "curriculum: cur.yaml\nn_envs: 2\nppo: {n_steps: 64, batch_size: 64}\n", "run.yaml")
+    with pytest.raises(ConfigError, match=r"stages\[1\].ppo: batch_size 256 exceeds the rollout size .* 64 x 2"):
+        load_run_config(path)
+    assert load_run_config(path, ("n_envs=4",)).n_envs == 4
+
+
 def test_set_overrides_are_checked_against_the_schema(tmp_path):
     write(tmp_path, GOOD_CURRICULUM, "cur.yaml")
     path = write(tmp_path, "curriculum: cur.yaml\nppo: {n_steps: 64, batch_size: 64}\n", "run.yaml")
