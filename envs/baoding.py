@@ -30,7 +30,7 @@ from envs.hand_env import MuscleHandEnv, vector_norm
 from envs.knobs import (
     Range,
     check_complete,
-    check_known,
+    merge_preset,
     parse_choice,
     parse_probability,
     parse_range,
@@ -166,9 +166,7 @@ def parse_knobs(preset: str = "p1", **knobs: Any) -> BaodingKnobs:
     Raises:
         ValueError: naming an unknown preset or knob (with the allowed ones), or a bad value.
     """
-    parse_choice("preset", preset, PRESETS)
-    check_known("Baoding knob", knobs, KNOB_HELP)
-    raw = {**PRESETS[preset], **knobs}
+    raw = merge_preset("Baoding knob", preset, PRESETS, knobs, KNOB_HELP)
     out: dict[str, Any] = {}
     optional_range = lambda key, **kw: None if raw[key] is None else parse_range(key, raw[key], **kw)  # noqa: E731
     if "direction" in raw:
@@ -230,6 +228,7 @@ class BaodingEnv(MuscleHandEnv):
     HORIZON = HORIZON
     OBS_SIZE = 86
     TASK_NAME = "baoding"
+    TASK_CLASS = BaodingTask
     KNOBS = KNOB_HELP
     REWARD_TERMS = REWARD_TERMS
     metadata = {"render_modes": ["rgb_array"], "render_fps": 40}
@@ -283,9 +282,6 @@ class BaodingEnv(MuscleHandEnv):
         size = tuple(k.ball_size.sample(rng) for _ in range(2)) if k.ball_size else (
             self._nominal_size,) * 2
         return BaodingTask(direction, period, x_radius, y_radius, start, size, mass, friction)
-
-    def task_from_mapping(self, values: Mapping[str, Any]) -> BaodingTask:
-        return BaodingTask.from_mapping(values)
 
     def _start_episode(self, task: BaodingTask, rng: np.random.Generator,
                        state: Mapping[str, Any] | None) -> None:

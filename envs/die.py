@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from envs.hand_env import MuscleHandEnv, vector_norm
-from envs.knobs import Range, check_complete, check_known, parse_choice, parse_range, parse_weights, to_float
+from envs.knobs import Range, check_complete, merge_preset, parse_range, parse_weights, to_float
 from envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
 
 MODEL_FILE = "myohand_die.xml"
@@ -97,9 +97,7 @@ def parse_knobs(preset: str = "p1", **knobs: Any) -> DieKnobs:
     Raises:
         ValueError: naming an unknown preset or knob (with the allowed ones), or a bad value.
     """
-    parse_choice("preset", preset, PRESETS)
-    check_known("die knob", knobs, KNOB_HELP)
-    raw = {**PRESETS[preset], **knobs}
+    raw = merge_preset("die knob", preset, PRESETS, knobs, KNOB_HELP)
     out: dict[str, Any] = {}
     if "goal_position" in raw:
         out["goal_position"] = parse_range("goal_position", raw["goal_position"])
@@ -148,6 +146,7 @@ class DieEnv(MuscleHandEnv):
     HORIZON = HORIZON
     OBS_SIZE = 102
     TASK_NAME = "die"
+    TASK_CLASS = DieTask
     KNOBS = KNOB_HELP
     REWARD_TERMS = REWARD_TERMS
     ACTION_DTYPE = np.float64
@@ -192,9 +191,6 @@ class DieEnv(MuscleHandEnv):
         size_change = float(rng.uniform(low=-k.size_change, high=k.size_change))
         return DieTask(tuple(offset.tolist()), tuple(euler.tolist()),
                        tuple(tuple(row) for row in friction.tolist()), mass, size_change)
-
-    def task_from_mapping(self, values: Mapping[str, Any]) -> DieTask:
-        return DieTask.from_mapping(values)
 
     def _start_episode(self, task: DieTask, rng: np.random.Generator,
                        state: Mapping[str, Any] | None) -> None:

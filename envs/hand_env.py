@@ -41,7 +41,7 @@ def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Rend
 
 class MuscleHandEnv(gym.Env):
     """Base of the MyoHand tasks. Subclasses set the class constants and implement
-    :meth:`sample_task`, :meth:`task_from_mapping`, :meth:`_start_episode`,
+    :meth:`sample_task`, :meth:`_start_episode`,
     :meth:`_observe` and :meth:`_reward_terms` (which must include ``solved`` and ``done``)."""
 
     MODEL_FILE: ClassVar[str]
@@ -49,6 +49,7 @@ class MuscleHandEnv(gym.Env):
     HORIZON: ClassVar[int]
     OBS_SIZE: ClassVar[int]
     TASK_NAME: ClassVar[str]
+    TASK_CLASS: ClassVar[type]  # the task-instance dataclass, with ``from_mapping``
     KNOBS: ClassVar[Mapping[str, str]]
     REWARD_TERMS: ClassVar[tuple[str, ...]]
     # myosuite's Baoding env maps actions in float32, its die env in float64: keep each one's.
@@ -85,7 +86,7 @@ class MuscleHandEnv(gym.Env):
         raise NotImplementedError
 
     def task_from_mapping(self, values: Mapping[str, Any]) -> Any:
-        raise NotImplementedError
+        return self.TASK_CLASS.from_mapping(values)
 
     def _start_episode(self, task: Any, rng: np.random.Generator, state: Mapping[str, Any] | None) -> None:
         """Apply the task to the model and set the initial state (``data`` was just reset)."""

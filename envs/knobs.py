@@ -132,6 +132,14 @@ def check_complete(kind: str, given: Mapping[str, Any], names: Iterable[str]) ->
         raise ValueError(f"{kind}: missing field(s) {', '.join(missing)}")
 
 
+def merge_preset(kind: str, preset: str, presets: Mapping[str, Mapping[str, Any]],
+                 knobs: Mapping[str, Any], allowed: Iterable[str]) -> dict[str, Any]:
+    """A preset's raw knob values with ``knobs`` over them, after checking both names."""
+    parse_choice("preset", preset, presets)
+    check_known(kind, knobs, allowed)
+    return {**presets[preset], **knobs}
+
+
 def parse_weights(name: str, weights: Mapping[str, Any], terms: Iterable[str]) -> dict[str, float]:
     """Reward weights keyed by term name; unknown terms are an error."""
     if not isinstance(weights, Mapping):
