@@ -1,0 +1,41 @@
+"""The learning check's comparison: scores at fixed env steps and time to the threshold."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+SPEC = importlib.util.spec_from_file_location(
+    "learning_check", Path(__file__).resolve().parents[1] / "benchmarks" / "learning_check.py")
+learning_check = importlib.util.module_from_spec(SPEC)
+SPEC.loader.exec_module(learning_check)
+
+
+def run(config: str, seed: int, steps: list[int], scores: list[float], reached: int | None = None) -> dict:
+    wall = [s / 100 for s in steps]  # 100 env steps/s
+    return {"config": config, "seed": seed, "threshold": 0.6, "env_steps": steps[-1], "wall_s": wall[-1],
+            "steps_per_s": 100.0, "reached_at_steps": reached,
+            "reached_at_wall_s": reached / 100 if reached else None,
+            "curve": {"steps": steps, "wall_s": wall, "score": scores}}
+
+
+def test_score_at_takes_the_last_point_at_or_before_the_step_and_none_past_the_run():
+    r = run("ours.yaml", 0, [1000, 2000, 3000], [0.1, 0.2, 0.3])
+    assert learning_check.score_at(r, 2500) == pytest.approx(0.2)
+    assert learning_check.score_at(r, 3000) == pytest.approx(0.3)
+    assert learning_check.score_at(r, 500) is None
+    assert learning_check.score_at(r, 4000) is None
+
+
+def test_summary_averages_seeds_and_bounds_an_unreached_threshold_from_below():
+    results = [run("ours.yaml", 0, [1000, 2000, 3000], [0.1, 0.3, 0.7], reached=3000),
+               run("ours.yaml", 1, [1000, 2000, 3000], [0.2, 0.5, 0.6], reached=2500),
+               run("reference.yaml", 0, [1000, 2000], [0.4, 0.5])]
+    text = learning_check.summarize(results, [1000, 2000, 3000])
+    lines = text.splitlines()
+    ours = next(line for line in lines if line.split()[0] == "ours")
+    assert ours.split()[-3:] == ["0.150", "0.400", "0.650"]
+    reference = next(line for line in lines if line.split()[0] == "reference")
+    assert reference.split()[-3:] == ["0.400", "0.500", "-"]
+    assert "ours: all seeds by 30 s" in text
+    assert "reference: 0/1 seeds (seed 0: not within 2000 steps, > 20 s)" in text
