@@ -1,7 +1,7 @@
 """Train a recurrent PPO policy through a YAML curriculum.
 
     python train.py --config configs/quickstart.yaml [--set ppo.learning_rate=3e-4 ...]
-    python train.py --resume runs/quickstart-20261122-101500-s0
+    python train.py --resume runs/quickstart-20261122-101500-s0 [--max-hours 8]
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--total-steps", type=int, help="same as --set total_steps=N")
     parser.add_argument("--run-dir", type=Path, help="run folder (default: a new one under output_dir)")
     parser.add_argument("--overwrite", action="store_true", help="replace --run-dir if it exists")
+    parser.add_argument("--max-hours", type=float, metavar="H",
+                        help="stop after H hours of training in this call (checkpointed; --resume continues)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     for flag, key in (("seed", "seed"), ("n_envs", "n_envs"), ("total_steps", "total_steps")):
@@ -49,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     print(f"run folder: {trainer.run_dir}  (seed {trainer.config.seed})")
-    state = trainer.run()
+    state = trainer.run(max_wall_s=args.max_hours * 3600 if args.max_hours is not None else None)
     print(f"{state.status} at step {state.num_timesteps}, stage {state.stage_index + 1}/"
           f"{len(trainer.config.curriculum.stages)} ({trainer.stage.name}); run folder: {trainer.run_dir}")
     return 130 if state.status == "interrupted" else 0

@@ -2,7 +2,8 @@
 
     python benchmarks/learning_check.py [--budget 2000000] [--reference-budget 100000]
         [--seeds 0 1 2] [--out DIR] [--ours configs/baoding_sds.yaml]
-        [--reference configs/reference_2022.yaml] [--skip-reference] [--add-results JSON ...]
+        [--reference configs/reference_2022.yaml] [--reference-minutes M] [--skip-reference]
+        [--skip-ours] [--add-results JSON ...]
 
 Each setup trains on the first stage of its curriculum alone (the run ends when the stage's
 threshold is reached, or at the budget), from the same seeds. Reported per setup and seed:
@@ -46,7 +47,7 @@ def first_stage_curriculum(config: Path, folder: Path) -> Path:
     return path
 
 
-def train(config: Path, seed: int, budget: int, folder: Path) -> dict:
+def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float | None = None) -> dict:
     from curricula.training import CurriculumTrainer
 
     curriculum = first_stage_curriculum(config, folder)
@@ -54,7 +55,7 @@ def train(config: Path, seed: int, budget: int, folder: Path) -> dict:
     trainer = CurriculumTrainer.start(config, (f"curriculum={curriculum}", f"seed={seed}", f"total_steps={budget}"),
                                       run_dir=run_dir, progress=False)
     rule = trainer.config.curriculum.stages[0].advance
-    state = trainer.run()
+    state = trainer.run(max_wall_s=max_wall_s)
     with (run_dir / "episodes.csv").open(newline="") as file:
         rows = list(csv.DictReader(file))
     steps = np.array([int(r["step"]) for r in rows])
@@ -136,21 +137,29 @@ def main() -> None:
     parser.add_argument("--budget", type=int, default=2_000_000, help="env steps per run of ours")
     parser.add_argument("--reference-budget", type=int, default=100_000,
                         help="env steps per reference run (~30 min each at the reference's speed)")
+    parser.add_argument("--reference-minutes", type=float,
+                        help="also end each reference run after this much training time, e.g. the time "
+                             "ours took to the threshold: a reference run that has not reached it by then "
+                             "is slower in wall time")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--ours", type=Path, default=REPO / "configs" / "baoding_sds.yaml")
     parser.add_argument("--reference", type=Path, default=REPO / "configs" / "reference_2022.yaml")
     parser.add_argument("--skip-reference", action="store_true")
+    parser.add_argument("--skip-ours", action="store_true")
     parser.add_argument("--add-results", type=Path, nargs="*", default=[],
                         help="learning_check.json files of earlier runs to include in the summary and plot")
     parser.add_argument("--out", type=Path, default=Path("learning_check"))
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     results = [r for path in args.add_results for r in json.loads(path.read_text())]
-    runs = [(args.ours, args.budget)] + ([] if args.skip_reference else [(args.reference, args.reference_budget)])
+    reference_wall_s = args.reference_minutes * 60 if args.reference_minutes is not None else None
+    runs = [] if args.skip_ours else [(args.ours, args.budget, None)]
+    if not args.skip_reference:
+        runs.append((args.reference, args.reference_budget, reference_wall_s))
     with tempfile.TemporaryDirectory() as folder:
-        for config, budget in runs:
+        for config, budget, max_wall_s in runs:
             for seed in args.seeds:
-                result = train(config, seed, budget, Path(folder))
+                result = train(config, seed, budget, Path(folder), max_wall_s)
                 results.append(result)
                 reached = (f"reached {result['threshold']} at {result['reached_at_steps']} steps, "
                            f"{result['reached_at_wall_s']:.0f} s" if result["reached_at_steps"] else

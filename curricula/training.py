@@ -180,7 +180,7 @@ class CurriculumState:
     episodes_per_stage: dict[str, int] = field(default_factory=dict)
     steps_per_stage: dict[str, int] = field(default_factory=dict)
     history: list[dict[str, Any]] = field(default_factory=list)  # one entry per transition
-    status: str = "running"  # running | completed | stopped | budget_reached | interrupted
+    status: str = "running"  # running | completed | stopped | budget_reached | interrupted | time_limit
     num_timesteps: int = 0
     wall_s: float = 0.0  # training wall time so far, over all sessions of the run
 
@@ -367,7 +367,7 @@ class CurriculumTrainer:
         if checkpoint is None:
             raise ConfigError(f"{run_dir}: no complete checkpoint to resume from")
         state = CurriculumState.from_json(checkpoint.state.read_text())
-        if state.status != "running" and state.status != "interrupted":
+        if state.status not in ("running", "interrupted", "time_limit"):
             raise ConfigError(f"{run_dir}: the run already ended ({state.status}); nothing to resume")
         state.status = "running"
         torch.set_num_threads(config.num_threads or os.cpu_count() or 1)
@@ -387,9 +387,10 @@ class CurriculumTrainer:
     def stage(self) -> Stage:
         return self.config.curriculum.stages[self.state.stage_index]
 
-    def run(self) -> CurriculumState:
+    def run(self, max_wall_s: float | None = None) -> CurriculumState:
         """Train until the curriculum completes or stops, the step budget is spent, or a
-        SIGINT/SIGTERM arrives (then a checkpoint is written and the run can be resumed)."""
+        SIGINT/SIGTERM arrives or this call has trained for ``max_wall_s`` seconds (then a
+        checkpoint is written and the run can be resumed)."""
         from tqdm import tqdm
 
         config, model, state = self.config, self.model, self.state
@@ -408,12 +409,17 @@ class CurriculumTrainer:
         for sig in previous:
             signal.signal(sig, request_stop)
         rollout = model.n_steps * model.n_envs
-        started, start_steps = time.perf_counter(), model.num_timesteps
+        started, start_steps, start_wall = time.perf_counter(), model.num_timesteps, state.wall_s
         try:
             self._announce_stage(bar)
             while state.status == "running":
                 if model.num_timesteps >= config.total_steps:
                     state.status = "budget_reached"
+                    break
+                if max_wall_s is not None and state.wall_s - start_wall >= max_wall_s:
+                    state.status = "time_limit"
+                    bar.write(f"time limit of {max_wall_s:.0f} s reached; continue with "
+                              f"`python train.py --resume {self.run_dir}`")
                     break
                 steps_before, started_at, env_before = model.num_timesteps, time.perf_counter(), self.env_clock.seconds
                 model.learn(total_timesteps=rollout, callback=collector, reset_num_timesteps=False,
@@ -441,7 +447,7 @@ class CurriculumTrainer:
                 signal.signal(sig, handler)
             bar.close()
         self.save_checkpoint()
-        if state.status != "interrupted":
+        if state.status not in ("interrupted", "time_limit"):
             self.save_final()
         return state
 

@@ -96,6 +96,19 @@ def test_crash_mid_write_leaves_previous_checkpoint_loadable(tmp_path):
     assert RecurrentPPO.load(good.model).num_timesteps == int(good.model.name.split("_")[2])
 
 
+def test_time_limit_pauses_the_run_and_resume_continues_it(tmp_path):
+    config = write_config(tmp_path, total=100_000)
+    run = tmp_path / "run"
+    # Any positive limit stops after the first rollout (2 envs x 64 steps), as a pause.
+    state = CurriculumTrainer.start(config, run_dir=run, progress=False).run(max_wall_s=1e-9)
+    assert state.status == "time_limit" and state.num_timesteps == 128 and state.wall_s > 0
+    assert latest_checkpoint(run).model.name == "rl_model_128_steps.zip"
+    assert not (run / "final_model.zip").exists()
+    resumed = CurriculumTrainer.resume(run, progress=False)
+    state = resumed.run(max_wall_s=1e-9)
+    assert state.status == "time_limit" and state.num_timesteps == 256
+
+
 def run_train(args: list[str], cwd: Path, **kwargs) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.Popen([sys.executable, str(REPO / "train.py"), *args], cwd=cwd, env=env,
