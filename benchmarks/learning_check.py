@@ -3,7 +3,7 @@
     python benchmarks/learning_check.py [--budget 2000000] [--reference-budget 100000]
         [--seeds 0 1 2] [--out DIR] [--ours configs/baoding_sds.yaml]
         [--reference configs/reference_2022.yaml] [--reference-minutes M] [--skip-reference]
-        [--skip-ours] [--add-results JSON ...]
+        [--skip-ours] [--reference-fast-update] [--add-results JSON ...]
 
 Each setup trains on the first stage of its curriculum alone (the run ends when the stage's
 threshold is reached, or at the budget), from the same seeds. Reported per setup and seed:
@@ -15,6 +15,10 @@ The reference runs at ~60 env steps/s on 2 cores, so it gets its own, smaller bu
 that ends at its budget without reaching the threshold still bounds its time to the threshold
 from below (more than its wall time), which is what the summary compares ours against. Results
 of earlier runs (e.g. a reference run that took an hour) can be added with --add-results.
+--reference-fast-update trains the reference with our whole-sequence LSTM update instead of
+sb3-contrib's step-by-step loop: the same function (tests/test_speed_parts.py), ~2.5x faster, so
+its curve against env steps can be followed further; its wall times are then not the
+reference's.
 """
 
 from __future__ import annotations
@@ -47,13 +51,20 @@ def first_stage_curriculum(config: Path, folder: Path) -> Path:
     return path
 
 
-def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float | None = None) -> dict:
+def setup_name(result: dict) -> str:
+    return result.get("setup") or Path(result["config"]).stem
+
+
+def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float | None = None,
+          overrides: tuple[str, ...] = (), setup: str | None = None) -> dict:
     from curricula.training import CurriculumTrainer
 
+    setup = setup or config.stem
     curriculum = first_stage_curriculum(config, folder)
-    run_dir = folder / f"{config.stem}_s{seed}"
-    trainer = CurriculumTrainer.start(config, (f"curriculum={curriculum}", f"seed={seed}", f"total_steps={budget}"),
-                                      run_dir=run_dir, progress=False)
+    run_dir = folder / f"{setup}_s{seed}"
+    trainer = CurriculumTrainer.start(
+        config, overrides + (f"curriculum={curriculum}", f"seed={seed}", f"total_steps={budget}"),
+        run_dir=run_dir, progress=False)
     rule = trainer.config.curriculum.stages[0].advance
     state = trainer.run(max_wall_s=max_wall_s)
     with (run_dir / "episodes.csv").open(newline="") as file:
@@ -65,7 +76,7 @@ def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float 
 
     curve = trailing_mean(scores, WINDOW) if len(rows) else np.array([])
     passed = [h for h in state.history if h["decision"] == "passed"]
-    return {"config": str(config), "seed": seed, "metric": rule.metric, "threshold": rule.threshold,
+    return {"config": str(config), "setup": setup, "overrides": list(overrides), "seed": seed, "metric": rule.metric, "threshold": rule.threshold,
             "window": rule.window, "env_steps": state.num_timesteps, "wall_s": state.wall_s,
             "steps_per_s": state.num_timesteps / max(state.wall_s, 1e-9),
             "reached_at_steps": passed[0]["at_step"] if passed else None,
@@ -81,7 +92,7 @@ def plot(results: list[dict], path: Path) -> None:
 
     fig, (by_steps, by_wall) = plt.subplots(1, 2, figsize=(12, 4.5))
     for r in results:
-        label = f"{Path(r['config']).stem} seed {r['seed']}"
+        label = f"{setup_name(r)} seed {r['seed']}"
         by_steps.plot(r["curve"]["steps"], r["curve"]["score"], label=label)
         by_wall.plot(np.array(r["curve"]["wall_s"]) / 60, r["curve"]["score"], label=label)
     for axis, name in ((by_steps, "env steps"), (by_wall, "wall time (min)")):
@@ -109,7 +120,7 @@ def summarize(results: list[dict], marks: list[int]) -> str:
     """Per-step and per-second comparison of the setups, as text."""
     setups: dict[str, list[dict]] = {}
     for r in results:
-        setups.setdefault(Path(r["config"]).stem, []).append(r)
+        setups.setdefault(setup_name(r), []).append(r)
     threshold = results[0]["threshold"]
     lines = [f"score (mean of last {WINDOW} training episodes) at env steps, mean over seeds:",
              f"{'setup':>18} {'seeds':>5} {'steps/s':>8} " + " ".join(f"{m // 1000:>6}k" for m in marks)]
@@ -146,6 +157,9 @@ def main() -> None:
     parser.add_argument("--reference", type=Path, default=REPO / "configs" / "reference_2022.yaml")
     parser.add_argument("--skip-reference", action="store_true")
     parser.add_argument("--skip-ours", action="store_true")
+    parser.add_argument("--reference-fast-update", action="store_true",
+                        help="train the reference with the whole-sequence LSTM update (same function, faster) "
+                             "to follow its curve against env steps further; its wall times are then not the reference's")
     parser.add_argument("--add-results", type=Path, nargs="*", default=[],
                         help="learning_check.json files of earlier runs to include in the summary and plot")
     parser.add_argument("--out", type=Path, default=Path("learning_check"))
@@ -153,18 +167,21 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     results = [r for path in args.add_results for r in json.loads(path.read_text())]
     reference_wall_s = args.reference_minutes * 60 if args.reference_minutes is not None else None
-    runs = [] if args.skip_ours else [(args.ours, args.budget, None)]
+    runs = [] if args.skip_ours else [(args.ours, args.budget, None, (), None)]
     if not args.skip_reference:
-        runs.append((args.reference, args.reference_budget, reference_wall_s))
+        fast = args.reference_fast_update
+        runs.append((args.reference, args.reference_budget, reference_wall_s,
+                     ("policy.fast_lstm_update=true",) if fast else (),
+                     f"{args.reference.stem}_fast_update" if fast else None))
     with tempfile.TemporaryDirectory() as folder:
-        for config, budget, max_wall_s in runs:
+        for config, budget, max_wall_s, overrides, setup in runs:
             for seed in args.seeds:
-                result = train(config, seed, budget, Path(folder), max_wall_s)
+                result = train(config, seed, budget, Path(folder), max_wall_s, overrides, setup)
                 results.append(result)
                 reached = (f"reached {result['threshold']} at {result['reached_at_steps']} steps, "
                            f"{result['reached_at_wall_s']:.0f} s" if result["reached_at_steps"] else
                            f"did not reach {result['threshold']} in {result['env_steps']} steps")
-                print(f"{config.stem:>16} seed {seed}: {result['steps_per_s']:.0f} steps/s, {reached}", flush=True)
+                print(f"{result['setup']:>16} seed {seed}: {result['steps_per_s']:.0f} steps/s, {reached}", flush=True)
                 (args.out / "learning_check.json").write_text(json.dumps(results, indent=2))
     common = min(r["env_steps"] for r in results)
     marks = sorted({int(common * f) // 1000 * 1000 for f in (0.25, 0.5, 0.75, 1.0)}

@@ -39,3 +39,11 @@ def test_summary_averages_seeds_and_bounds_an_unreached_threshold_from_below():
     assert reference.split()[-3:] == ["0.400", "0.500", "-"]
     assert "ours: all seeds by 30 s" in text
     assert "reference: 0/1 seeds (seed 0: not within 2000 steps, > 20 s)" in text
+
+
+def test_summary_keeps_two_setups_of_one_config_apart_by_their_setup_names():
+    stock = run("reference.yaml", 0, [1000, 2000], [0.1, 0.2])
+    fast = dict(run("reference.yaml", 0, [1000, 2000], [0.3, 0.4]), setup="reference_fast_update")
+    text = learning_check.summarize([stock, fast], [1000, 2000])
+    rows = {line.split()[0]: line.split()[-2:] for line in text.splitlines()[2:4]}
+    assert rows == {"reference": ["0.100", "0.200"], "reference_fast_update": ["0.300", "0.400"]}
