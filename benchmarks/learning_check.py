@@ -116,6 +116,22 @@ def score_at(result: dict, step: int) -> float | None:
     return float(scores[upto][-1]) if upto.any() else None
 
 
+def first_reached(result: dict, level: float) -> tuple[int, float] | None:
+    """Env steps and wall seconds at which the trailing score (over a full window of
+    episodes) first reaches ``level``; None if it never does."""
+    scores = np.array(result["curve"]["score"])[WINDOW - 1:]
+    hits = np.flatnonzero(scores >= level)
+    if not len(hits):
+        return None
+    index = hits[0] + WINDOW - 1
+    return int(result["curve"]["steps"][index]), float(result["curve"]["wall_s"][index])
+
+
+# Score levels, as fractions of the stage threshold, at which setups are compared by the
+# env steps and time they first need to get there.
+LEVEL_FRACTIONS = (0.1, 0.15, 0.2, 0.25, 0.5)
+
+
 def summarize(results: list[dict], marks: list[int]) -> str:
     """Per-step and per-second comparison of the setups, as text."""
     setups: dict[str, list[dict]] = {}
@@ -131,6 +147,14 @@ def summarize(results: list[dict], marks: list[int]) -> str:
             cells.append(f"{np.mean(values):7.3f}" if values else f"{'-':>7}")
         speed = np.mean([r["steps_per_s"] for r in runs])
         lines.append(f"{name:>18} {len(runs):>5} {speed:8.0f} " + " ".join(cells))
+    lines.append("env steps (k) / wall seconds at which each seed first reaches a score:")
+    levels = [round(threshold * f, 3) for f in LEVEL_FRACTIONS]
+    lines.append(f"{'setup':>18} {'seed':>5} " + " ".join(f"{level:>13}" for level in levels))
+    for name, runs in setups.items():
+        for r in runs:
+            cells = [f"{hit[0] // 1000:>6}k/{hit[1]:>5.0f}s" if hit else f"{'-':>13}"
+                     for hit in (first_reached(r, level) for level in levels)]
+            lines.append(f"{name:>18} {r['seed']:>5} " + " ".join(cells))
     lines.append(f"time to the stage threshold ({threshold}):")
     for name, runs in setups.items():
         reached = [r for r in runs if r["reached_at_steps"] is not None]

@@ -47,3 +47,14 @@ def test_summary_keeps_two_setups_of_one_config_apart_by_their_setup_names():
     text = learning_check.summarize([stock, fast], [1000, 2000])
     rows = {line.split()[0]: line.split()[-2:] for line in text.splitlines()[2:4]}
     assert rows == {"reference": ["0.100", "0.200"], "reference_fast_update": ["0.300", "0.400"]}
+
+
+def test_first_reached_needs_a_full_window_and_reports_steps_and_seconds():
+    window = learning_check.WINDOW
+    steps = [1000 * (i + 1) for i in range(window + 3)]
+    # A lucky start (1.0 over a short window) must not count; a full window at 0.5 does.
+    scores = [1.0] + [0.1] * (window - 1) + [0.3, 0.5, 0.7]
+    r = run("ours.yaml", 0, steps, scores)
+    assert learning_check.first_reached(r, 0.5) == (steps[window + 1], steps[window + 1] / 100)
+    assert learning_check.first_reached(r, 0.1) == (steps[window - 1], steps[window - 1] / 100)
+    assert learning_check.first_reached(r, 0.8) is None
