@@ -28,6 +28,7 @@ import csv
 import json
 import sys
 import tempfile
+from typing import NamedTuple
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +52,18 @@ def first_stage_curriculum(config: Path, folder: Path) -> Path:
     return path
 
 
+class Setup(NamedTuple):
+    """One trained setup: a run config with its budget, time limit and overrides."""
+
+    config: Path
+    budget: int
+    max_wall_s: float | None = None
+    overrides: tuple[str, ...] = ()
+    name: str | None = None  # defaults to the config's file name
+
+
 def setup_name(result: dict) -> str:
+    """A result's setup name (results of older runs carry only their config)."""
     return result.get("setup") or Path(result["config"]).stem
 
 
@@ -76,8 +88,8 @@ def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float 
 
     curve = trailing_mean(scores, WINDOW) if len(rows) else np.array([])
     passed = [h for h in state.history if h["decision"] == "passed"]
-    return {"config": str(config), "setup": setup, "overrides": list(overrides), "seed": seed, "metric": rule.metric, "threshold": rule.threshold,
-            "window": rule.window, "env_steps": state.num_timesteps, "wall_s": state.wall_s,
+    return {"config": str(config), "setup": setup, "overrides": list(overrides), "seed": seed,
+            "metric": rule.metric, "threshold": rule.threshold, "window": rule.window, "env_steps": state.num_timesteps, "wall_s": state.wall_s,
             "steps_per_s": state.num_timesteps / max(state.wall_s, 1e-9),
             "reached_at_steps": passed[0]["at_step"] if passed else None,
             "reached_at_wall_s": float(wall[steps <= passed[0]["at_step"]][-1]) if passed and len(rows) else None,
@@ -191,16 +203,17 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     results = [r for path in args.add_results for r in json.loads(path.read_text())]
     reference_wall_s = args.reference_minutes * 60 if args.reference_minutes is not None else None
-    runs = [] if args.skip_ours else [(args.ours, args.budget, None, (), None)]
+    setups = [] if args.skip_ours else [Setup(args.ours, args.budget)]
     if not args.skip_reference:
         fast = args.reference_fast_update
-        runs.append((args.reference, args.reference_budget, reference_wall_s,
-                     ("policy.fast_lstm_update=true",) if fast else (),
-                     f"{args.reference.stem}_fast_update" if fast else None))
+        setups.append(Setup(args.reference, args.reference_budget, reference_wall_s,
+                            ("policy.fast_lstm_update=true",) if fast else (),
+                            f"{args.reference.stem}_fast_update" if fast else None))
     with tempfile.TemporaryDirectory() as folder:
-        for config, budget, max_wall_s, overrides, setup in runs:
+        for setup in setups:
             for seed in args.seeds:
-                result = train(config, seed, budget, Path(folder), max_wall_s, overrides, setup)
+                result = train(setup.config, seed, setup.budget, Path(folder), setup.max_wall_s,
+                               setup.overrides, setup.name)
                 results.append(result)
                 reached = (f"reached {result['threshold']} at {result['reached_at_steps']} steps, "
                            f"{result['reached_at_wall_s']:.0f} s" if result["reached_at_steps"] else
