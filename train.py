@@ -1,7 +1,7 @@
 """Train a recurrent PPO policy through a YAML curriculum.
 
     python train.py --config configs/quickstart.yaml [--set ppo.learning_rate=3e-4 ...]
-    python train.py --resume runs/quickstart-20261122-101500-s0 [--max-hours 8]
+    python train.py --resume runs/quickstart-20261122-101500-s0 [--max-hours 8] [--total-steps N]
 """
 
 from __future__ import annotations
@@ -22,18 +22,20 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="override a config value, e.g. --set n_envs=8 --set ppo.batch_size=256")
     parser.add_argument("--seed", type=int, help="same as --set seed=N")
     parser.add_argument("--n-envs", type=int, help="same as --set n_envs=N")
-    parser.add_argument("--total-steps", type=int, help="same as --set total_steps=N")
+    parser.add_argument("--total-steps", type=int,
+                        help="same as --set total_steps=N; with --resume, raises the run's step budget")
     parser.add_argument("--run-dir", type=Path, help="run folder (default: a new one under output_dir)")
     parser.add_argument("--overwrite", action="store_true", help="replace --run-dir if it exists")
     parser.add_argument("--max-hours", type=float, metavar="H",
                         help="stop after H hours of training in this call (checkpointed; --resume continues)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
+    if args.resume and (args.overrides or args.seed is not None or args.n_envs is not None or args.run_dir):
+        parser.error("--resume continues a run as configured; only --total-steps, --max-hours and "
+                     "--no-progress apply")
     for flag, key in (("seed", "seed"), ("n_envs", "n_envs"), ("total_steps", "total_steps")):
-        if getattr(args, flag) is not None:
+        if getattr(args, flag) is not None and not args.resume:
             args.overrides.append(f"{key}={getattr(args, flag)}")
-    if args.resume and (args.overrides or args.run_dir):
-        parser.error("--resume continues a run as configured; --set/--seed/--run-dir do not apply")
     return args
 
 
@@ -43,7 +45,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         if args.resume:
-            trainer = CurriculumTrainer.resume(args.resume, progress=not args.no_progress)
+            trainer = CurriculumTrainer.resume(args.resume, progress=not args.no_progress,
+                                               total_steps=args.total_steps)
         else:
             trainer = CurriculumTrainer.start(args.config, tuple(args.overrides), args.run_dir,
                                               args.overwrite, progress=not args.no_progress)

@@ -353,22 +353,36 @@ class CurriculumTrainer:
         return trainer
 
     @classmethod
-    def resume(cls, run_dir: str | Path, progress: bool = True) -> "CurriculumTrainer":
+    def resume(cls, run_dir: str | Path, progress: bool = True,
+               total_steps: int | None = None) -> "CurriculumTrainer":
         """Continue a run from its latest complete checkpoint: same stage, counters,
-        optimizer and normalization state, same TensorBoard folder."""
+        optimizer and normalization state, same TensorBoard folder. ``total_steps`` raises
+        the run's step budget (recorded in its config.yaml), which also continues a run that
+        ended at its budget."""
         import torch
         from sb3_contrib import RecurrentPPO
         from stable_baselines3.common.logger import configure
         from stable_baselines3.common.vec_env import VecNormalize
 
         run_dir = Path(run_dir)
-        config = load_run_config(run_dir / "config.yaml")
+        config_path = run_dir / "config.yaml"
+        config = load_run_config(config_path)
         checkpoint = latest_checkpoint(run_dir)
         if checkpoint is None:
             raise ConfigError(f"{run_dir}: no complete checkpoint to resume from")
         state = CurriculumState.from_json(checkpoint.state.read_text())
-        if state.status not in ("running", "interrupted", "time_limit"):
-            raise ConfigError(f"{run_dir}: the run already ended ({state.status}); nothing to resume")
+        resumable = ("running", "interrupted", "time_limit")
+        if total_steps is not None:
+            if total_steps <= state.num_timesteps:
+                raise ConfigError(f"{config_path}: total_steps {total_steps} must exceed the "
+                                  f"{state.num_timesteps} steps already trained")
+            config = load_run_config(config_path, (f"total_steps={total_steps}",))
+            config_path.write_text(yaml.safe_dump(dict(config.source), sort_keys=False))
+            resumable += ("budget_reached",)
+        if state.status not in resumable:
+            hint = ("; add --total-steps N to train on to N steps" if state.status == "budget_reached"
+                    else "; nothing to resume")
+            raise ConfigError(f"{run_dir}: the run already ended ({state.status}){hint}")
         state.status = "running"
         torch.set_num_threads(config.num_threads or os.cpu_count() or 1)
         stage = config.curriculum.stages[state.stage_index]

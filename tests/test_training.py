@@ -10,7 +10,10 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+import yaml
 
+from curricula.schema import ConfigError
 from curricula.training import CurriculumState, CurriculumTrainer, checkpoint_files, latest_checkpoint
 
 REPO = Path(__file__).resolve().parents[1]
@@ -107,6 +110,24 @@ def test_time_limit_pauses_the_run_and_resume_continues_it(tmp_path):
     resumed = CurriculumTrainer.resume(run, progress=False)
     state = resumed.run(max_wall_s=1e-9)
     assert state.status == "time_limit" and state.num_timesteps == 256
+
+
+def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
+    config = write_config(tmp_path, total=256)
+    run = tmp_path / "run"
+    state = CurriculumTrainer.start(config, run_dir=run, progress=False).run()
+    assert state.status == "budget_reached" and state.num_timesteps == 256
+    with pytest.raises(ConfigError, match="budget_reached.*--total-steps"):
+        CurriculumTrainer.resume(run, progress=False)
+    with pytest.raises(ConfigError, match="total_steps 256 must exceed the 256 steps"):
+        CurriculumTrainer.resume(run, progress=False, total_steps=256)
+    resumed = CurriculumTrainer.resume(run, progress=False, total_steps=512)
+    state = resumed.run()
+    assert state.status == "budget_reached" and state.num_timesteps == 512
+    assert yaml.safe_load((run / "config.yaml").read_text())["total_steps"] == 512
+    assert latest_checkpoint(run).model.name == "rl_model_512_steps.zip"
+    steps = [int(line.split(",")[0]) for line in (run / "episodes.csv").read_text().splitlines()[1:]]
+    assert steps == sorted(steps) and steps[-1] > 256
 
 
 def run_train(args: list[str], cwd: Path, **kwargs) -> subprocess.Popen:
