@@ -150,13 +150,15 @@ def summarize(results: list[dict], marks: list[int]) -> str:
     for r in results:
         setups.setdefault(setup_name(r), []).append(r)
     threshold = results[0]["threshold"]
-    lines = [f"score (mean of last {WINDOW} training episodes) at env steps, mean over seeds:",
-             f"{'setup':>18} {'seeds':>5} {'steps/s':>8} " + " ".join(f"{m // 1000:>6}k" for m in marks)]
+    lines = [f"score (mean of last {WINDOW} training episodes) at env steps, mean over seeds "
+             "((n): over the n seeds whose runs got that far):",
+             f"{'setup':>18} {'seeds':>5} {'steps/s':>8} " + " ".join(f"{m // 1000:>6}k   " for m in marks)]
     for name, runs in setups.items():
         cells = []
         for mark in marks:
             values = [v for v in (score_at(r, mark) for r in runs) if v is not None]
-            cells.append(f"{np.mean(values):7.3f}" if values else f"{'-':>7}")
+            count = f"({len(values)})" if 0 < len(values) < len(runs) else ""
+            cells.append(f"{np.mean(values):7.3f}{count:<3}" if values else f"{'-':>7}   ")
         speed = np.mean([r["steps_per_s"] for r in runs])
         lines.append(f"{name:>18} {len(runs):>5} {speed:8.0f} " + " ".join(cells))
     lines.append("env steps (k) / wall seconds at which each seed first reaches a score:")

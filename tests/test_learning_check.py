@@ -41,6 +41,14 @@ def test_summary_averages_seeds_and_bounds_an_unreached_threshold_from_below():
     assert "reference: 0/1 seeds (seed 0: not within 2000 steps, > 20 s)" in text
 
 
+def test_summary_says_over_how_many_seeds_a_mark_is_averaged_when_runs_ended_early():
+    results = [run("ours.yaml", 0, [1000, 2000], [0.1, 0.7], reached=2000),
+               run("ours.yaml", 1, [1000, 2000, 3000], [0.3, 0.4, 0.5])]
+    text = learning_check.summarize(results, [1000, 2000, 3000])
+    ours = next(line for line in text.splitlines() if line.split()[0] == "ours")
+    assert ours.split()[-3:] == ["0.200", "0.550", "0.500(1)"]
+
+
 def test_summary_keeps_two_setups_of_one_config_apart_by_their_setup_names():
     stock = run("reference.yaml", 0, [1000, 2000], [0.1, 0.2])
     fast = dict(run("reference.yaml", 0, [1000, 2000], [0.3, 0.4]), setup="reference_fast_update")
