@@ -19,6 +19,11 @@ of earlier runs (e.g. a reference run that took an hour) can be added with --add
 sb3-contrib's step-by-step loop: the same function (tests/test_speed_parts.py), ~2.5x faster, so
 its curve against env steps can be followed further; its wall times are then not the
 reference's.
+
+Run folders are kept under OUT/runs/<setup>_s<seed>. Running the same command again continues
+them instead of starting over: an interrupted or time-limited run resumes from its last
+checkpoint, a larger --budget (or --reference-minutes) trains a finished run on, and a run that
+is already done is only read. Delete a run folder to start it afresh.
 """
 
 from __future__ import annotations
@@ -27,7 +32,6 @@ import argparse
 import csv
 import json
 import sys
-import tempfile
 from typing import NamedTuple
 from pathlib import Path
 
@@ -69,16 +73,29 @@ def setup_name(result: dict) -> str:
 
 def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float | None = None,
           overrides: tuple[str, ...] = (), setup: str | None = None) -> dict:
-    from curricula.training import CurriculumTrainer
+    """Train (or continue, or only read) the run ``folder/<setup>_s<seed>`` up to ``budget``
+    env steps and ``max_wall_s`` seconds of training in all, and return its result."""
+    from curricula.schema import load_run_config
+    from curricula.training import CurriculumState, CurriculumTrainer, latest_checkpoint
 
     setup = setup or config.stem
-    curriculum = first_stage_curriculum(config, folder)
     run_dir = folder / f"{setup}_s{seed}"
-    trainer = CurriculumTrainer.start(
-        config, overrides + (f"curriculum={curriculum}", f"seed={seed}", f"total_steps={budget}"),
-        run_dir=run_dir, progress=False)
-    rule = trainer.config.curriculum.stages[0].advance
-    state = trainer.run(max_wall_s=max_wall_s)
+    checkpoint = latest_checkpoint(run_dir) if run_dir.is_dir() else None
+    if checkpoint is None:
+        curriculum = first_stage_curriculum(config, folder)
+        trainer = CurriculumTrainer.start(
+            config, overrides + (f"curriculum={curriculum}", f"seed={seed}", f"total_steps={budget}"),
+            run_dir=run_dir, overwrite=True, progress=False)
+        state = trainer.run(max_wall_s=max_wall_s)
+    else:
+        state = CurriculumState.from_json(checkpoint.state.read_text())
+        can_continue = state.status in ("running", "interrupted", "time_limit", "budget_reached")
+        time_left = None if max_wall_s is None else max_wall_s - state.wall_s
+        if can_continue and state.num_timesteps < budget and (time_left is None or time_left > 0):
+            print(f"continuing {run_dir} from {state.num_timesteps} env steps", flush=True)
+            trainer = CurriculumTrainer.resume(run_dir, progress=False, total_steps=budget)
+            state = trainer.run(max_wall_s=time_left)
+    rule = load_run_config(run_dir / "config.yaml").curriculum.stages[0].advance
     with (run_dir / "episodes.csv").open(newline="") as file:
         rows = list(csv.DictReader(file))
     steps = np.array([int(r["step"]) for r in rows])
@@ -89,7 +106,8 @@ def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float 
     curve = trailing_mean(scores, WINDOW) if len(rows) else np.array([])
     passed = [h for h in state.history if h["decision"] == "passed"]
     return {"config": str(config), "setup": setup, "overrides": list(overrides), "seed": seed,
-            "metric": rule.metric, "threshold": rule.threshold, "window": rule.window, "env_steps": state.num_timesteps, "wall_s": state.wall_s,
+            "metric": rule.metric, "threshold": rule.threshold, "window": rule.window,
+            "status": state.status, "env_steps": state.num_timesteps, "wall_s": state.wall_s,
             "steps_per_s": state.num_timesteps / max(state.wall_s, 1e-9),
             "reached_at_steps": passed[0]["at_step"] if passed else None,
             "reached_at_wall_s": float(wall[steps <= passed[0]["at_step"]][-1]) if passed and len(rows) else None,
@@ -211,17 +229,21 @@ def main() -> None:
         setups.append(Setup(args.reference, args.reference_budget, reference_wall_s,
                             ("policy.fast_lstm_update=true",) if fast else (),
                             f"{args.reference.stem}_fast_update" if fast else None))
-    with tempfile.TemporaryDirectory() as folder:
-        for setup in setups:
-            for seed in args.seeds:
-                result = train(setup.config, seed, setup.budget, Path(folder), setup.max_wall_s,
-                               setup.overrides, setup.name)
-                results.append(result)
-                reached = (f"reached {result['threshold']} at {result['reached_at_steps']} steps, "
-                           f"{result['reached_at_wall_s']:.0f} s" if result["reached_at_steps"] else
-                           f"did not reach {result['threshold']} in {result['env_steps']} steps")
-                print(f"{result['setup']:>16} seed {seed}: {result['steps_per_s']:.0f} steps/s, {reached}", flush=True)
-                (args.out / "learning_check.json").write_text(json.dumps(results, indent=2))
+    runs = args.out / "runs"
+    runs.mkdir(exist_ok=True)
+    for setup in setups:
+        for seed in args.seeds:
+            result = train(setup.config, seed, setup.budget, runs, setup.max_wall_s,
+                           setup.overrides, setup.name)
+            results.append(result)
+            (args.out / "learning_check.json").write_text(json.dumps(results, indent=2))
+            if result["status"] == "interrupted":
+                print(f"interrupted; run the same command again to continue from {runs}")
+                sys.exit(130)
+            reached = (f"reached {result['threshold']} at {result['reached_at_steps']} steps, "
+                       f"{result['reached_at_wall_s']:.0f} s" if result["reached_at_steps"] else
+                       f"did not reach {result['threshold']} in {result['env_steps']} steps")
+            print(f"{result['setup']:>16} seed {seed}: {result['steps_per_s']:.0f} steps/s, {reached}", flush=True)
     common = min(r["env_steps"] for r in results)
     marks = sorted({int(common * f) // 1000 * 1000 for f in (0.25, 0.5, 0.75, 1.0)}
                    | {m for m in (250_000, 500_000, 1_000_000, 2_000_000) if m > common

@@ -5,6 +5,9 @@ from pathlib import Path
 
 import pytest
 
+from curricula.training import latest_checkpoint
+from tiny_run import CURRICULUM, write_config
+
 SPEC = importlib.util.spec_from_file_location(
     "learning_check", Path(__file__).resolve().parents[1] / "benchmarks" / "learning_check.py")
 learning_check = importlib.util.module_from_spec(SPEC)
@@ -66,3 +69,25 @@ def test_first_reached_needs_a_full_window_and_reports_steps_and_seconds():
     assert learning_check.first_reached(r, 0.5) == (steps[window + 1], steps[window + 1] / 100)
     assert learning_check.first_reached(r, 0.1) == (steps[window - 1], steps[window - 1] / 100)
     assert learning_check.first_reached(r, 0.8) is None
+
+
+def test_run_folders_are_kept_and_a_second_call_continues_them(tmp_path):
+    # A first stage that is never passed, so the budget and the time limit end each call.
+    config = write_config(tmp_path, total=1, curriculum=CURRICULUM.replace("threshold: 0.01", "threshold: 0.99"))
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    first = learning_check.train(config, 5, 256, runs)
+    assert (first["status"], first["env_steps"], first["threshold"]) == ("budget_reached", 256, 0.99)
+    assert first["reached_at_steps"] is None and len(first["curve"]["steps"]) > 0
+    checkpoint = latest_checkpoint(runs / "run_s5")
+    again = learning_check.train(config, 5, 256, runs)  # already done: only read
+    assert latest_checkpoint(runs / "run_s5") == checkpoint and again["curve"] == first["curve"]
+    longer = learning_check.train(config, 5, 512, runs)
+    assert longer["env_steps"] == 512 and longer["wall_s"] > first["wall_s"]
+    count = len(first["curve"]["steps"])
+    assert longer["curve"]["steps"][:count] == first["curve"]["steps"]
+    assert len(longer["curve"]["steps"]) > count
+    # A time limit counts the run's training time over all calls: once spent, nothing more runs.
+    paused = learning_check.train(config, 6, 100_000, runs, max_wall_s=1e-9)
+    assert (paused["status"], paused["env_steps"]) == ("time_limit", 128)
+    assert learning_check.train(config, 6, 100_000, runs, max_wall_s=1e-9)["env_steps"] == 128
