@@ -371,18 +371,17 @@ class CurriculumTrainer:
         if checkpoint is None:
             raise ConfigError(f"{run_dir}: no complete checkpoint to resume from")
         state = CurriculumState.from_json(checkpoint.state.read_text())
-        resumable = ("running", "interrupted", "time_limit")
+        resumable = ("running", "interrupted", "time_limit") + (("budget_reached",) if total_steps else ())
+        if state.status not in resumable:
+            hint = ("; add --total-steps N to train on to N steps" if state.status == "budget_reached"
+                    else "; nothing to resume")
+            raise ConfigError(f"{run_dir}: the run already ended ({state.status}){hint}")
         if total_steps is not None:
             if total_steps <= state.num_timesteps:
                 raise ConfigError(f"{config_path}: total_steps {total_steps} must exceed the "
                                   f"{state.num_timesteps} steps already trained")
             config = load_run_config(config_path, (f"total_steps={total_steps}",))
             config_path.write_text(yaml.safe_dump(dict(config.source), sort_keys=False))
-            resumable += ("budget_reached",)
-        if state.status not in resumable:
-            hint = ("; add --total-steps N to train on to N steps" if state.status == "budget_reached"
-                    else "; nothing to resume")
-            raise ConfigError(f"{run_dir}: the run already ended ({state.status}){hint}")
         state.status = "running"
         torch.set_num_threads(config.num_threads or os.cpu_count() or 1)
         stage = config.curriculum.stages[state.stage_index]
