@@ -45,10 +45,32 @@ class AdvanceRule:
 
 
 @dataclass(frozen=True)
+class LearningRateDecay:
+    """A learning rate that falls log-linearly from ``start`` to ``end`` over ``steps`` env
+    steps, then stays at ``end``. Its clock starts where it is set: the run's first step for
+    the run config's ``ppo``, the stage's first step for a stage's ``ppo``.
+
+    YAML: ``learning_rate: {start: 3.0e-3, end: 1.0e-4, steps: 1500000}``.
+    """
+
+    start: float
+    end: float
+    steps: int
+
+    def at(self, elapsed_steps: int) -> float:
+        """The learning rate ``elapsed_steps`` env steps after the clock started."""
+        fraction = min(max(elapsed_steps / self.steps, 0.0), 1.0)
+        return self.start * (self.end / self.start) ** fraction
+
+
+LearningRate = float | LearningRateDecay
+
+
+@dataclass(frozen=True)
 class PpoOverrides:
     """PPO settings a stage changes at its start (None: keep the current value)."""
 
-    learning_rate: float | None = None
+    learning_rate: LearningRate | None = None
     n_steps: int | None = None
     batch_size: int | None = None
     clip_range: float | None = None
@@ -98,7 +120,7 @@ class PolicyConfig:
 class PpoConfig:
     """sb3-contrib RecurrentPPO hyper-parameters; defaults are the 2022 Baoding winner's."""
 
-    learning_rate: float = 2.56e-5
+    learning_rate: LearningRate = 2.56e-5
     n_steps: int = 128
     batch_size: int = 32
     n_epochs: int = 10
@@ -237,10 +259,24 @@ def _dataclass_from(reader: _Reader, key: str, raw: Any, cls: type, defaults: An
             values[name] = reader.number(path, value, integer=True, low=1)
         elif name == "log_std_init":
             values[name] = reader.number(path, value)
+        elif name == "learning_rate" and isinstance(value, Mapping):
+            values[name] = _learning_rate_decay(reader, path, value)
         else:
             values[name] = reader.number(path, value, low=0, strict_low=name in (
                 "learning_rate", "clip_range", "max_grad_norm", "clip_obs", "clip_reward"))
     return type(base)(**{**{f.name: getattr(base, f.name) for f in fields(cls)}, **values})
+
+
+def _learning_rate_decay(reader: _Reader, key: str, raw: Mapping[str, Any]) -> LearningRateDecay:
+    names = tuple(f.name for f in fields(LearningRateDecay))
+    reader.mapping(key, raw, names)
+    missing = [name for name in names if name not in raw]
+    if missing:
+        raise reader.error(key, f"a learning-rate decay needs {', '.join(names)}; missing: {', '.join(missing)}")
+    return LearningRateDecay(
+        start=reader.number(f"{key}.start", raw["start"], low=0, strict_low=True),
+        end=reader.number(f"{key}.end", raw["end"], low=0, strict_low=True),
+        steps=reader.number(f"{key}.steps", raw["steps"], integer=True, low=1))
 
 
 # -- curriculum --------------------------------------------------------------------------

@@ -31,6 +31,7 @@ from curricula.policy import SequenceLstmPolicy
 from curricula.schema import (
     ConfigError,
     Curriculum,
+    LearningRateDecay,
     PpoConfig,
     RunConfig,
     Stage,
@@ -106,7 +107,8 @@ def build_model(config: RunConfig, venv):
         "ortho_init": policy.ortho_init,
     }
     return RecurrentPPO(
-        SequenceLstmPolicy if policy.fast_lstm_update else "MlpLstmPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps,
+        SequenceLstmPolicy if policy.fast_lstm_update else "MlpLstmPolicy", venv,
+        learning_rate=learning_rate_at(config, CurriculumState()), n_steps=ppo.n_steps,
         batch_size=ppo.batch_size, n_epochs=ppo.n_epochs, gamma=ppo.gamma,
         gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range, ent_coef=ppo.ent_coef,
         vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, policy_kwargs=policy_kwargs,
@@ -115,19 +117,35 @@ def build_model(config: RunConfig, venv):
 
 def effective_ppo(base: PpoConfig, curriculum: Curriculum, stage_index: int) -> dict[str, Any]:
     """PPO settings in force at a stage: the run's, then each stage's overrides in order up
-    to this one (an override stays until a later stage changes it)."""
+    to this one (an override stays until a later stage changes it). The learning rate may be
+    a :class:`LearningRateDecay`; :func:`learning_rate_at` gives its value at a step."""
     settings = {k: getattr(base, k) for k in ("learning_rate", "n_steps", "batch_size", "clip_range", "ent_coef")}
     for stage in curriculum.stages[: stage_index + 1]:
         settings.update(stage.ppo.as_dict())
     return settings
 
 
-def apply_ppo_settings(model, settings: dict[str, Any]) -> None:
+def learning_rate_at(config: RunConfig, state: "CurriculumState") -> float:
+    """The learning rate in force at ``state.num_timesteps``: set by the run config or by the
+    latest stage up to the current one that sets it; a decay runs from that stage's first step."""
+    stage_starts = [0] + [entry["at_step"] for entry in state.history[: state.stage_index]]
+    rate, set_at_step = config.ppo.learning_rate, 0
+    for index, stage in enumerate(config.curriculum.stages[: state.stage_index + 1]):
+        if stage.ppo.learning_rate is not None:
+            rate, set_at_step = stage.ppo.learning_rate, stage_starts[index]
+    if isinstance(rate, LearningRateDecay):
+        return rate.at(state.num_timesteps - set_at_step)
+    return rate
+
+
+def apply_ppo_settings(model, settings: dict[str, Any], learning_rate: float) -> None:
     """Set learning rate, clip range, entropy coefficient, batch size and rollout length."""
     from stable_baselines3.common.utils import ConstantSchedule
 
-    model.learning_rate = settings["learning_rate"]
-    model.lr_schedule = ConstantSchedule(settings["learning_rate"])
+    # Our loop runs ``learn`` one rollout at a time, so SB3's progress-based schedules
+    # would restart every rollout: the rate is set from the env step count instead.
+    model.learning_rate = learning_rate
+    model.lr_schedule = ConstantSchedule(learning_rate)
     model.clip_range = ConstantSchedule(settings["clip_range"])
     model.ent_coef = settings["ent_coef"]
     model.batch_size = settings["batch_size"]
@@ -349,7 +367,7 @@ class CurriculumTrainer:
         model.set_logger(configure(str(run_dir / "tb"), ["tensorboard"]))
         state = CurriculumState()
         trainer = cls(config, run_dir, state, model, venv, progress)
-        apply_ppo_settings(model, effective_ppo(config.ppo, config.curriculum, 0))
+        trainer.apply_ppo_settings()
         return trainer
 
     @classmethod
@@ -391,7 +409,7 @@ class CurriculumTrainer:
         model.set_logger(configure(str(run_dir / "tb"), ["tensorboard"]))
         _truncate_episode_log(run_dir / EPISODES_FILE, state.num_timesteps)
         trainer = cls(config, run_dir, state, model, venv, progress)
-        apply_ppo_settings(model, effective_ppo(config.ppo, config.curriculum, state.stage_index))
+        trainer.apply_ppo_settings()
         return trainer
 
     # the loop ----------------------------------------------------------------------------
@@ -399,6 +417,12 @@ class CurriculumTrainer:
     @property
     def stage(self) -> Stage:
         return self.config.curriculum.stages[self.state.stage_index]
+
+    def apply_ppo_settings(self) -> None:
+        """Give the model the PPO settings in force at the current stage and step."""
+        self.state.num_timesteps = int(self.model.num_timesteps)
+        apply_ppo_settings(self.model, effective_ppo(self.config.ppo, self.config.curriculum, self.state.stage_index),
+                           learning_rate_at(self.config, self.state))
 
     def run(self, max_wall_s: float | None = None) -> CurriculumState:
         """Train until the curriculum completes or stops, the step budget is spent, or a
@@ -434,6 +458,7 @@ class CurriculumTrainer:
                     bar.write(f"time limit of {max_wall_s:.0f} s reached; continue with "
                               f"`python train.py --resume {self.run_dir}`")
                     break
+                self.apply_ppo_settings()  # a decaying learning rate moves on every rollout
                 steps_before, started_at, env_before = model.num_timesteps, time.perf_counter(), self.env_clock.seconds
                 model.learn(total_timesteps=rollout, callback=collector, reset_num_timesteps=False,
                             log_interval=1)
@@ -533,7 +558,7 @@ class CurriculumTrainer:
         self.progress = StageProgress()
         collector.stage_index = state.stage_index
         self.venv.env_method("configure", **stage_knobs(self.stage))
-        apply_ppo_settings(model, effective_ppo(config.ppo, config.curriculum, state.stage_index))
+        self.apply_ppo_settings()
         self._announce_stage(bar)
 
     def _sync_state(self) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from curricula.schema import ConfigError, load_curriculum, load_run_config
+from curricula.schema import ConfigError, LearningRateDecay, load_curriculum, load_run_config
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -76,6 +76,12 @@ def test_good_curriculum_is_parsed_with_defaults_merged(tmp_path):
     ("    ppo: {learning_rate: 1e-4, n_steps: 64}", "    ppo: {lr: 1e-4}",
      "stages[1].ppo.lr: unknown key; allowed: learning_rate, n_steps, batch_size, clip_range, ent_coef"),
     ("max_steps: 1000,", "max_steps: 50,", "stages[1].advance.max_steps: 50 is below min_steps 100"),
+    ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 1e-4},",
+     "stages[1].ppo.learning_rate: a learning-rate decay needs start, end, steps; missing: steps"),
+    ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 1e-4, stesp: 10},",
+     "stages[1].ppo.learning_rate.stesp: unknown key (did you mean 'steps'?); allowed: start, end, steps"),
+    ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 0, steps: 10},",
+     "stages[1].ppo.learning_rate.end: must be > 0, got 0"),
 ])
 def test_bad_curriculum_names_file_key_and_allowed(tmp_path, old, new, expected):
     assert old in GOOD_CURRICULUM
@@ -138,3 +144,24 @@ def test_set_overrides_are_checked_against_the_schema(tmp_path):
         load_run_config(path, ("ppo.learning_rat=3e-4",))
     with pytest.raises(ConfigError, match="expected key=value"):
         load_run_config(path, ("ppo.learning_rate",))
+
+
+def test_learning_rate_decay_is_read_from_configs_stages_and_overrides(tmp_path):
+    decay = "{start: 1e-3, end: 1e-5, steps: 1000}"
+    write(tmp_path, GOOD_CURRICULUM.replace("learning_rate: 1e-4,", f"learning_rate: {decay},"), "cur.yaml")
+    path = write(tmp_path, f"curriculum: cur.yaml\nppo: {{learning_rate: {decay}, n_steps: 64, batch_size: 64}}\n",
+                 "run.yaml")
+    config = load_run_config(path)
+    assert config.ppo.learning_rate == LearningRateDecay(start=1e-3, end=1e-5, steps=1000)
+    assert config.curriculum.stages[1].ppo.learning_rate == LearningRateDecay(1e-3, 1e-5, 1000)
+    overridden = load_run_config(path, ("ppo.learning_rate={start: 2e-3, end: 2e-4, steps: 50}",))
+    assert overridden.ppo.learning_rate == LearningRateDecay(2e-3, 2e-4, 50)
+    assert load_run_config(path, ("ppo.learning_rate=3e-4",)).ppo.learning_rate == 3e-4
+
+
+def test_learning_rate_decay_falls_log_linearly_then_holds():
+    decay = LearningRateDecay(start=1e-3, end=1e-5, steps=1000)
+    assert decay.at(0) == pytest.approx(1e-3)
+    assert decay.at(500) == pytest.approx(1e-4)  # halfway in steps: the geometric mean
+    assert decay.at(250) == pytest.approx(1e-3 * 10 ** -0.5)
+    assert decay.at(1000) == pytest.approx(1e-5) and decay.at(10**9) == pytest.approx(1e-5)

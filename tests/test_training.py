@@ -96,6 +96,30 @@ def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     assert steps == sorted(steps) and steps[-1] > 256
 
 
+def test_learning_rate_decay_follows_env_steps_across_stages_and_resume(tmp_path):
+    run_decay = "{start: 1.0e-3, end: 1.0e-5, steps: 1024}"
+    stage_decay = "{start: 2.0e-4, end: 2.0e-6, steps: 256}"
+    curriculum = CURRICULUM.replace("learning_rate: 1.0e-4,", f"learning_rate: {stage_decay},")
+    config = write_config(tmp_path, total=256, curriculum=curriculum)
+    config.write_text(config.read_text().replace("learning_rate: 3.0e-4,", f"learning_rate: {run_decay},"))
+    run = tmp_path / "run"
+    trainer = CurriculumTrainer.start(config, run_dir=run, progress=False)
+    state = trainer.run()
+    # Rollouts of 2 envs x 64 steps: the last update (steps 128-256, stage 1) used the rate
+    # at step 128, one eighth of the way down the run's decay.
+    optimizer_rate = trainer.model.policy.optimizer.param_groups[0]["lr"]
+    assert optimizer_rate == pytest.approx(1e-3 * 0.01 ** (128 / 1024))
+    # Stage 1 passed after that update: stage 2's decay starts from its top.
+    assert state.history[0]["at_step"] == 256 and trainer.model.learning_rate == pytest.approx(2e-4)
+    # Continued past stage 1's pass, the stage's own decay runs from the stage's first step.
+    resumed = CurriculumTrainer.resume(run, progress=False, total_steps=2048)
+    state = resumed.run()
+    passed_at = state.history[0]["at_step"]
+    last_rollout_start = state.num_timesteps - 64  # stage 2's rollouts: 2 envs x 32 steps
+    expected = 2e-4 * 0.01 ** min((last_rollout_start - passed_at) / 256, 1.0)
+    assert state.stage_index == 1 and resumed.model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(expected)
+
+
 def run_train(args: list[str], cwd: Path, **kwargs) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.Popen([sys.executable, str(REPO / "train.py"), *args], cwd=cwd, env=env,
