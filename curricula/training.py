@@ -108,7 +108,7 @@ def build_model(config: RunConfig, venv):
     }
     return RecurrentPPO(
         SequenceLstmPolicy if policy.fast_lstm_update else "MlpLstmPolicy", venv,
-        learning_rate=learning_rate_at(config, CurriculumState()), n_steps=ppo.n_steps,
+        learning_rate=learning_rate_at(config, CurriculumState(), step=0), n_steps=ppo.n_steps,
         batch_size=ppo.batch_size, n_epochs=ppo.n_epochs, gamma=ppo.gamma,
         gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range, ent_coef=ppo.ent_coef,
         vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, policy_kwargs=policy_kwargs,
@@ -117,24 +117,25 @@ def build_model(config: RunConfig, venv):
 
 def effective_ppo(base: PpoConfig, curriculum: Curriculum, stage_index: int) -> dict[str, Any]:
     """PPO settings in force at a stage: the run's, then each stage's overrides in order up
-    to this one (an override stays until a later stage changes it). The learning rate may be
-    a :class:`LearningRateDecay`; :func:`learning_rate_at` gives its value at a step."""
-    settings = {k: getattr(base, k) for k in ("learning_rate", "n_steps", "batch_size", "clip_range", "ent_coef")}
+    to this one (an override stays until a later stage changes it). The learning rate, which
+    may decay with env steps, comes from :func:`learning_rate_at`."""
+    settings = {k: getattr(base, k) for k in ("n_steps", "batch_size", "clip_range", "ent_coef")}
     for stage in curriculum.stages[: stage_index + 1]:
-        settings.update(stage.ppo.as_dict())
+        settings.update({k: v for k, v in stage.ppo.as_dict().items() if k in settings})
     return settings
 
 
-def learning_rate_at(config: RunConfig, state: "CurriculumState") -> float:
-    """The learning rate in force at ``state.num_timesteps``: set by the run config or by the
-    latest stage up to the current one that sets it; a decay runs from that stage's first step."""
+def learning_rate_at(config: RunConfig, state: "CurriculumState", step: int) -> float:
+    """The learning rate in force at env step ``step`` of the run's current stage: set by the
+    run config or by the latest stage up to the current one that sets it (an override stays
+    until a later stage changes it); a decay runs from that stage's first step."""
     stage_starts = [0] + [entry["at_step"] for entry in state.history[: state.stage_index]]
     rate, set_at_step = config.ppo.learning_rate, 0
     for index, stage in enumerate(config.curriculum.stages[: state.stage_index + 1]):
         if stage.ppo.learning_rate is not None:
             rate, set_at_step = stage.ppo.learning_rate, stage_starts[index]
     if isinstance(rate, LearningRateDecay):
-        return rate.at(state.num_timesteps - set_at_step)
+        return rate.at(step - set_at_step)
     return rate
 
 
@@ -420,9 +421,8 @@ class CurriculumTrainer:
 
     def apply_ppo_settings(self) -> None:
         """Give the model the PPO settings in force at the current stage and step."""
-        self.state.num_timesteps = int(self.model.num_timesteps)
         apply_ppo_settings(self.model, effective_ppo(self.config.ppo, self.config.curriculum, self.state.stage_index),
-                           learning_rate_at(self.config, self.state))
+                           learning_rate_at(self.config, self.state, int(self.model.num_timesteps)))
 
     def run(self, max_wall_s: float | None = None) -> CurriculumState:
         """Train until the curriculum completes or stops, the step budget is spent, or a
