@@ -86,8 +86,31 @@ class EvaluationReport:
             "drop_rate": drop_rate(self.episodes),
             "mean_length": float(np.mean([e.length for e in self.episodes])) if self.episodes else math.nan,
             "per_direction": per_direction,
+            "per_start_phase": per_start_phase(self.episodes),
             "per_episode": [e.to_dict() for e in self.episodes],
         }
+
+
+PHASE_SECTOR_DEG = 45
+
+
+def per_start_phase(episodes: Sequence[EpisodeResult]) -> dict[str, dict[str, Any]]:
+    """Score and drop rate by the goal's start phase, in 45-degree sectors ("0-45", ...).
+
+    Empty unless the start phase varies between episodes (stages with random phases, P2's
+    random start offsets): a policy's average can hide sectors where it always drops the balls.
+    """
+    phased = [e for e in episodes if e.start_phase is not None]
+    if len({e.start_phase for e in phased}) < 2:
+        return {}
+    n_sectors = 360 // PHASE_SECTOR_DEG
+    sectors: dict[int, list[EpisodeResult]] = {}
+    for e in phased:
+        # min(): a phase that rounds to exactly 2 pi belongs to the last sector
+        sectors.setdefault(min(int(math.degrees(e.start_phase) // PHASE_SECTOR_DEG), n_sectors - 1), []).append(e)
+    return {f"{k * PHASE_SECTOR_DEG}-{(k + 1) * PHASE_SECTOR_DEG}": {
+                "episodes": len(members), "score": official_score(members), "drop_rate": drop_rate(members)}
+            for k, members in sorted(sectors.items())}
 
 
 # -- finding checkpoints -----------------------------------------------------------------
@@ -398,6 +421,13 @@ def format_table(reports: Sequence[EvaluationReport]) -> str:
             d = s["per_direction"].get(direction)
             cells.append(f"{d['score']:.3f} (n={d['episodes']})" if d else "-")
         rows.append((f"score {direction}", cells))
+    sectors = sorted({k for s in summaries for k in s["per_start_phase"]}, key=lambda k: int(k.split("-")[0]))
+    for sector in sectors:
+        cells = []
+        for s in summaries:
+            d = s["per_start_phase"].get(sector)
+            cells.append(f"{d['score']:.3f} (n={d['episodes']}, drops {d['drop_rate']:.0%})" if d else "-")
+        rows.append((f"score, start {sector} deg", cells))
     width = max(len(name) for name, _ in rows)
     col_width = [max(len(c), *(len(cells[i]) for _, cells in rows)) for i, c in enumerate(columns)]
     lines = [" " * width + "  " + "  ".join(c.ljust(w) for c, w in zip(columns, col_width))]

@@ -297,6 +297,9 @@ class BaodingEnv(MuscleHandEnv):
     def _episode_label(self) -> str:
         return self.task.direction
 
+    def _episode_start_phase(self) -> float:
+        return float(self.task.start_angle % (2 * np.pi))
+
     def _camera_target(self) -> np.ndarray:
         return self.data.site_xpos[list(self._target_sites)].mean(axis=0)
 

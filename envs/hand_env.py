@@ -106,6 +106,10 @@ class MuscleHandEnv(gym.Env):
         """A grouping of episodes in reports (Baoding: the direction)."""
         return None
 
+    def _episode_start_phase(self) -> float | None:
+        """Where on its path the episode's goal starts, for reports by start phase."""
+        return None
+
     # -- distribution -------------------------------------------------------------------
 
     def configure(self, preset: str | None = None, **knobs: Any) -> None:
@@ -193,7 +197,7 @@ class MuscleHandEnv(gym.Env):
             info["episode_result"] = EpisodeResult(
                 solved_steps=episode["solved_steps"], length=episode["length"], horizon=self.horizon,
                 dropped=bool(terms["done"]), effort=episode["effort_sum"] / episode["length"],
-                direction=self._episode_label(), task=self.TASK_NAME)
+                direction=self._episode_label(), task=self.TASK_NAME, start_phase=self._episode_start_phase())
         return obs, reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:

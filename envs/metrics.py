@@ -30,6 +30,7 @@ class EpisodeResult:
     effort: float  # mean over the episode's steps of |act| / n_muscles
     direction: str | None = None  # Baoding: hold, cw or ccw
     task: str = "baoding"
+    start_phase: float | None = None  # Baoding: the targets' start angle on their orbit, rad in [0, 2 pi)
 
     @property
     def score(self) -> float:

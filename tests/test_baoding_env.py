@@ -151,6 +151,20 @@ def test_drop_terminates_with_episode_result():
     result = info["episode_result"]
     assert result.length == step + 1 and result.dropped and result.horizon == 200
     assert result.score == result.solved_steps / 200
+    assert result.start_phase == pytest.approx(OFFICIAL_START_ANGLE)  # P1's fixed start, pi / 4
+
+
+def test_episode_result_records_the_random_start_phase():
+    env = BaodingEnv(start_angle="uniform", horizon=2)
+    phases = []
+    for seed in range(3):
+        env.reset(seed=seed)
+        start = env.task.start_angle
+        for _ in range(2):
+            *_, info = env.step(np.zeros(39, np.float32))
+        phases.append(info["episode_result"].start_phase)
+        assert phases[-1] == pytest.approx(start % (2 * math.pi)) and 0 <= phases[-1] < 2 * math.pi
+    assert len(set(phases)) == 3
 
 
 def test_truncates_at_horizon():

@@ -66,6 +66,14 @@ def test_evaluation_reports_official_metrics(run_dir):
     assert summary["drop_rate"] == np.mean([e["dropped"] for e in summary["per_episode"]])
     assert summary["score_ci95"][0] <= summary["score"] <= summary["score_ci95"][1]
     assert set(summary["per_direction"]) == {"hold"}
+    # Random start phases: each sector's score is the mean over the episodes that started in it.
+    sectors = summary["per_start_phase"]
+    assert sum(s["episodes"] for s in sectors.values()) == 4
+    for name, sector in sectors.items():
+        low, high = (float(v) for v in name.split("-"))
+        inside = [e for e in summary["per_episode"] if low <= np.degrees(e["start_phase"]) < high]
+        assert sector["episodes"] == len(inside)
+        assert sector["score"] == pytest.approx(np.mean([e["solved_steps"] / 200 for e in inside]))
     # Deterministic: the same seeds give the same numbers, with or without worker processes.
     again = ev.evaluate(ref, ev.choose_env(ref, "stage:hold"), episodes=4, seed=3, workers=2)
     assert again.summary()["per_episode"] == summary["per_episode"]

@@ -22,3 +22,21 @@ def test_confidence_interval():
     # std (ddof=1) = 0.57735; half width = 1.96 * 0.57735 / 2
     assert mean == 0.5 and high - mean == pytest.approx(0.565803, abs=1e-6) and low == pytest.approx(1 - high)
     assert mean_confidence_interval([0.3]) == (0.3, 0.3, 0.3)
+
+
+def test_scores_by_start_phase_sector():
+    from curricula.evaluation import per_start_phase
+
+    def episode(degrees, solved, dropped=False):
+        return EpisodeResult(solved, 200, 200, dropped, 0.1, "hold", start_phase=math.radians(degrees))
+
+    episodes = [episode(10, 100), episode(44.9, 50, True), episode(183, 20, True), episode(359.9, 200),
+                EpisodeResult(10, 200, 200, False, 0.1, "hold", start_phase=2 * math.pi)]  # rounds up to 2 pi
+    sectors = per_start_phase(episodes)
+    assert list(sectors) == ["0-45", "180-225", "315-360"]
+    assert sectors["0-45"] == {"episodes": 2, "score": pytest.approx(0.375), "drop_rate": 0.5}
+    assert sectors["180-225"] == {"episodes": 1, "score": pytest.approx(0.1), "drop_rate": 1.0}
+    assert sectors["315-360"] == {"episodes": 2, "score": pytest.approx(0.525), "drop_rate": 0.0}
+    # One start phase for all episodes (P1's fixed start), or none recorded: no breakdown.
+    assert per_start_phase([episode(45, 10), episode(45, 20)]) == {}
+    assert per_start_phase([EpisodeResult(10, 200, 200, False, 0.1)]) == {}
