@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import pickle
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -415,19 +415,16 @@ def format_table(reports: Sequence[EvaluationReport]) -> str:
             ("effort", [f"{s['effort']:.4f}" for s in summaries]),
             ("drop rate", [f"{s['drop_rate']:.3f}" for s in summaries]),
             ("mean length", [f"{s['mean_length']:.1f}" for s in summaries])]
+    def breakdown(key: str, group: str, text: Callable[[dict], str]) -> list[str]:
+        return [text(s[key][group]) if group in s[key] else "-" for s in summaries]
+
     for direction in directions:
-        cells = []
-        for s in summaries:
-            d = s["per_direction"].get(direction)
-            cells.append(f"{d['score']:.3f} (n={d['episodes']})" if d else "-")
-        rows.append((f"score {direction}", cells))
+        rows.append((f"score {direction}",
+                     breakdown("per_direction", direction, lambda d: f"{d['score']:.3f} (n={d['episodes']})")))
     sectors = sorted({k for s in summaries for k in s["per_start_phase"]}, key=lambda k: int(k.split("-")[0]))
     for sector in sectors:
-        cells = []
-        for s in summaries:
-            d = s["per_start_phase"].get(sector)
-            cells.append(f"{d['score']:.3f} (n={d['episodes']}, drops {d['drop_rate']:.0%})" if d else "-")
-        rows.append((f"score, start {sector} deg", cells))
+        rows.append((f"score, start {sector} deg", breakdown(
+            "per_start_phase", sector, lambda d: f"{d['score']:.3f} (n={d['episodes']}, drops {d['drop_rate']:.0%})")))
     width = max(len(name) for name, _ in rows)
     col_width = [max(len(c), *(len(cells[i]) for _, cells in rows)) for i, c in enumerate(columns)]
     lines = [" " * width + "  " + "  ".join(c.ljust(w) for c, w in zip(columns, col_width))]

@@ -74,6 +74,9 @@ def test_evaluation_reports_official_metrics(run_dir):
         inside = [e for e in summary["per_episode"] if low <= np.degrees(e["start_phase"]) < high]
         assert sector["episodes"] == len(inside)
         assert sector["score"] == pytest.approx(np.mean([e["solved_steps"] / 200 for e in inside]))
+    table = ev.format_table([report])
+    for name, sector in sectors.items():
+        assert f"score, start {name} deg" in table and f"(n={sector['episodes']}, drops" in table
     # Deterministic: the same seeds give the same numbers, with or without worker processes.
     again = ev.evaluate(ref, ev.choose_env(ref, "stage:hold"), episodes=4, seed=3, workers=2)
     assert again.summary()["per_episode"] == summary["per_episode"]
