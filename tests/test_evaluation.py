@@ -107,9 +107,10 @@ def test_cli_writes_json_plots_and_video(run_dir, tmp_path):
     data = json.loads((out / "e.json").read_text())
     (report,) = data["reports"]
     for key in ("checkpoint", "env", "official_env", "seed", "episodes", "score", "score_ci95", "effort",
-                "drop_rate", "mean_length", "per_direction", "per_episode"):
+                "drop_rate", "mean_length", "per_direction", "per_start_phase", "per_episode"):
         assert key in report, key
     assert report["env"] == "p1" and report["episodes"] == 3
+    assert report["per_start_phase"] == {}  # P1 starts every episode at the same phase
     for name in ("score_histogram.png", f"learning_curve_{run_dir.name}.png"):
         png = (out / name).read_bytes()
         assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000, name
