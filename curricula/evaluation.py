@@ -103,14 +103,22 @@ def per_start_phase(episodes: Sequence[EpisodeResult]) -> dict[str, dict[str, An
     phased = [e for e in episodes if e.start_phase is not None]
     if len({e.start_phase for e in phased}) < 2:
         return {}
-    n_sectors = 360 // PHASE_SECTOR_DEG
     sectors: dict[int, list[EpisodeResult]] = {}
     for e in phased:
-        # min(): a phase that rounds to exactly 2 pi belongs to the last sector
-        sectors.setdefault(min(int(math.degrees(e.start_phase) // PHASE_SECTOR_DEG), n_sectors - 1), []).append(e)
-    return {f"{k * PHASE_SECTOR_DEG}-{(k + 1) * PHASE_SECTOR_DEG}": {
-                "episodes": len(members), "score": official_score(members), "drop_rate": drop_rate(members)}
+        sectors.setdefault(phase_sector(e.start_phase), []).append(e)
+    return {sector_name(k): {"episodes": len(members), "score": official_score(members),
+                             "drop_rate": drop_rate(members)}
             for k, members in sorted(sectors.items())}
+
+
+def phase_sector(phase: float) -> int:
+    """Index of the 45-degree sector holding a start phase in radians [0, 2 pi)."""
+    # min(): a phase that rounds to exactly 2 pi belongs to the last sector
+    return min(int(math.degrees(phase) // PHASE_SECTOR_DEG), 360 // PHASE_SECTOR_DEG - 1)
+
+
+def sector_name(index: int) -> str:
+    return f"{index * PHASE_SECTOR_DEG}-{(index + 1) * PHASE_SECTOR_DEG}"
 
 
 # -- finding checkpoints -----------------------------------------------------------------
@@ -345,7 +353,8 @@ def trailing_mean(values: np.ndarray, window: int) -> np.ndarray:
 
 
 def plot_learning_curve(run_dir: Path, path: Path, window: int = 50) -> None:
-    """Score and survival of training episodes against env steps, stage changes marked."""
+    """Score and survival of training episodes against env steps, stage changes marked; below,
+    when the goal's start phase varies, the score of each 45-degree start-phase sector."""
     import csv
     import json
 
@@ -362,23 +371,38 @@ def plot_learning_curve(run_dir: Path, path: Path, window: int = 50) -> None:
     steps = np.array([int(r["step"]) for r in rows])
     scores = np.array([float(r["score"]) for r in rows])
     survival = 1.0 - np.array([int(r["dropped"]) for r in rows])
-    fig, ax = plt.subplots(figsize=(9, 4.5))
+    # Runs begun before start phases were logged have no such column.
+    phases = [r.get("start_phase") or "" for r in rows]
+    by_phase = len({p for p in phases if p}) > 1
+    fig, axes = plt.subplots(2 if by_phase else 1, 1, figsize=(9, 8 if by_phase else 4.5), sharex=True, squeeze=False)
+    ax = axes[0, 0]
     if len(rows):
         ax.plot(steps, trailing_mean(scores, window), label=f"score (mean of last {window} episodes)")
         ax.plot(steps, trailing_mean(survival, window), label="no-drop rate", alpha=0.7)
     state_file = run_dir / STATE_FILE
-    if state_file.is_file():
-        history = json.loads(state_file.read_text()).get("history", [])
-        for entry in history:
-            ax.axvline(entry["at_step"], color="gray", linestyle="--", linewidth=1)
-            ax.text(entry["at_step"], 0.98, f" {entry['stage']} {entry['decision']}", rotation=90,
-                    va="top", ha="right", fontsize=7, transform=ax.get_xaxis_transform())
-    ax.set_xlabel("env steps")
+    history = json.loads(state_file.read_text()).get("history", []) if state_file.is_file() else []
+    for entry in history:
+        ax.axvline(entry["at_step"], color="gray", linestyle="--", linewidth=1)
+        ax.text(entry["at_step"], 0.98, f" {entry['stage']} {entry['decision']}", rotation=90,
+                va="top", ha="right", fontsize=7, transform=ax.get_xaxis_transform())
+    axes[-1, 0].set_xlabel("env steps")
     ax.set_ylabel("training episodes")
     top = max([0.1] + [float(v) for v in (scores.max() if len(rows) else 0, survival.max() if len(rows) else 0)])
     ax.set_ylim(0, min(1.0, 1.25 * top))  # low early scores stay readable
     ax.set_title(f"{run_dir.name}: training episodes by stage")
     ax.legend(loc="best", fontsize=8)
+    if by_phase:
+        sectors = np.array([phase_sector(float(p)) if p else -1 for p in phases])
+        below = axes[1, 0]
+        for k in sorted(set(sectors[sectors >= 0].tolist())):
+            chosen = sectors == k
+            below.plot(steps[chosen], trailing_mean(scores[chosen], window), linewidth=1,
+                       color=plt.get_cmap("tab10")(k), label=f"{sector_name(k)} deg")
+        for entry in history:
+            below.axvline(entry["at_step"], color="gray", linestyle="--", linewidth=1)
+        below.set_ylabel(f"score by start phase\n(last {window} episodes of each)")
+        below.set_ylim(0, ax.get_ylim()[1])
+        below.legend(loc="upper left", ncol=4, fontsize=7)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)

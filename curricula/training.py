@@ -45,7 +45,7 @@ CHECKPOINT_DIR = "checkpoints"
 LATEST_FILE = "latest.json"
 EPISODES_FILE = "episodes.csv"
 EPISODE_COLUMNS = ("step", "wall_s", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
-                   "effort", "direction")
+                   "effort", "direction", "start_phase")
 
 
 # -- envs --------------------------------------------------------------------------------
@@ -573,13 +573,17 @@ class CurriculumTrainer:
     def _log_episodes(self, results: list[tuple[int, EpisodeResult]]) -> None:
         path = self.run_dir / EPISODES_FILE
         new = not path.exists()
+        # A run begun before the last columns existed keeps its header, and its rows match it.
+        n_columns = len(EPISODE_COLUMNS) if new else len(_episode_log_header(path))
         with path.open("a", newline="") as file:
             writer = csv.writer(file)
             if new:
                 writer.writerow(EPISODE_COLUMNS)
             for step, r in results:
+                phase = "" if r.start_phase is None else f"{r.start_phase:.4f}"
                 writer.writerow((step, f"{self.state.wall_s:.2f}", self.state.stage_index, self.stage.name, f"{r.score:.6g}",
-                                 r.solved_steps, r.length, int(r.dropped), f"{r.effort:.6g}", r.direction))
+                                 r.solved_steps, r.length, int(r.dropped), f"{r.effort:.6g}", r.direction,
+                                 phase)[:n_columns])
 
     # checkpoints -------------------------------------------------------------------------
 
@@ -652,6 +656,11 @@ def latest_checkpoint(run_dir: Path) -> CheckpointFiles | None:
         if files.complete():
             return files
     return None
+
+
+def _episode_log_header(path: Path) -> list[str]:
+    with path.open(newline="") as file:
+        return next(csv.reader(file), [])
 
 
 def _truncate_episode_log(path: Path, max_step: int) -> None:

@@ -116,6 +116,9 @@ def test_cli_writes_json_plots_and_video(run_dir, tmp_path):
         assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000, name
     import imageio.v3 as iio
 
+    # The run trained at random start phases: a second panel plots each phase sector's score.
+    assert iio.imread(out / f"learning_curve_{run_dir.name}.png").shape[:2] == (800, 900)
+
     frames = iio.imread(out / "v.mp4")
     lengths = [e["length"] for e in report["per_episode"][:2]]  # the video shows episodes seed, seed+1
     assert frames.shape == (sum(lengths), 480, 640, 3)

@@ -83,6 +83,12 @@ def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     run = tmp_path / "run"
     state = CurriculumTrainer.start(config, run_dir=run, progress=False).run()
     assert state.status == "budget_reached" and state.num_timesteps == 256
+    # Each episode's start phase is logged (random phases here).
+    header, *rows = [line.split(",") for line in (run / "episodes.csv").read_text().splitlines()]
+    assert header[-1] == "start_phase" and len({row[-1] for row in rows}) > 1
+    assert all(0 <= float(row[-1]) < 6.2832 for row in rows)
+    # A run begun by an older version logged no start phases: its rows keep matching its header.
+    (run / "episodes.csv").write_text("".join(",".join(r[:-1]) + "\n" for r in [header, *rows]))
     with pytest.raises(ConfigError, match="budget_reached.*--total-steps"):
         CurriculumTrainer.resume(run, progress=False)
     with pytest.raises(ConfigError, match="total_steps 256 must exceed the 256 steps"):
@@ -92,7 +98,9 @@ def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     assert state.status == "budget_reached" and state.num_timesteps == 512
     assert yaml.safe_load((run / "config.yaml").read_text())["total_steps"] == 512
     assert latest_checkpoint(run).model.name == "rl_model_512_steps.zip"
-    steps = [int(line.split(",")[0]) for line in (run / "episodes.csv").read_text().splitlines()[1:]]
+    lines = [line.split(",") for line in (run / "episodes.csv").read_text().splitlines()]
+    assert lines[0] == header[:-1] and {len(line) for line in lines} == {len(header) - 1}
+    steps = [int(line[0]) for line in lines[1:]]
     assert steps == sorted(steps) and steps[-1] > 256
 
 
