@@ -439,6 +439,7 @@ def format_table(reports: Sequence[EvaluationReport]) -> str:
             ("effort", [f"{s['effort']:.4f}" for s in summaries]),
             ("drop rate", [f"{s['drop_rate']:.3f}" for s in summaries]),
             ("mean length", [f"{s['mean_length']:.1f}" for s in summaries])]
+
     def breakdown(key: str, group: str, text: Callable[[dict], str]) -> list[str]:
         return [text(s[key][group]) if group in s[key] else "-" for s in summaries]
 
