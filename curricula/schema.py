@@ -117,6 +117,23 @@ class PolicyConfig:
 
 
 @dataclass(frozen=True)
+class PpoWarmup:
+    """More gradient work per sample for the run's first ``steps`` env steps: smaller
+    minibatches and/or more epochs while the policy is new and every sample teaches much, then
+    the run's (and stages') own settings. None: keep the value the run would otherwise use.
+
+    YAML, under ``ppo``: ``warmup: {steps: 150000, batch_size: 128, n_epochs: 10}``.
+    """
+
+    steps: int = 0
+    batch_size: int | None = None
+    n_epochs: int | None = None
+
+    def active(self, step: int) -> bool:
+        return step < self.steps
+
+
+@dataclass(frozen=True)
 class PpoConfig:
     """sb3-contrib RecurrentPPO hyper-parameters; defaults are the 2022 Baoding winner's."""
 
@@ -130,6 +147,7 @@ class PpoConfig:
     ent_coef: float = 3.6e-6
     vf_coef: float = 0.84
     max_grad_norm: float = 0.7
+    warmup: PpoWarmup = PpoWarmup()
 
 
 @dataclass(frozen=True)
@@ -261,6 +279,8 @@ def _dataclass_from(reader: _Reader, key: str, raw: Any, cls: type, defaults: An
             values[name] = reader.number(path, value)
         elif name == "learning_rate" and isinstance(value, Mapping):
             values[name] = _learning_rate_decay(reader, path, value)
+        elif name == "warmup":
+            values[name] = _ppo_warmup(reader, path, value)
         else:
             values[name] = reader.number(path, value, low=0, strict_low=name in (
                 "learning_rate", "clip_range", "max_grad_norm", "clip_obs", "clip_reward"))
@@ -277,6 +297,18 @@ def _learning_rate_decay(reader: _Reader, key: str, raw: Mapping[str, Any]) -> L
         start=reader.number(f"{key}.start", raw["start"], low=0, strict_low=True),
         end=reader.number(f"{key}.end", raw["end"], low=0, strict_low=True),
         steps=reader.number(f"{key}.steps", raw["steps"], integer=True, low=1))
+
+
+def _ppo_warmup(reader: _Reader, key: str, raw: Any) -> PpoWarmup:
+    names = tuple(f.name for f in fields(PpoWarmup))
+    raw = reader.mapping(key, raw, names)
+    if not raw:
+        return PpoWarmup()
+    if "steps" not in raw:
+        raise reader.error(key, "a warm-up needs steps: how many env steps from the run's start it lasts")
+    values = {name: reader.number(f"{key}.{name}", raw[name], integer=True, low=0 if name == "steps" else 1)
+              for name in names if raw.get(name) is not None}
+    return PpoWarmup(**values)
 
 
 # -- curriculum --------------------------------------------------------------------------
@@ -413,6 +445,10 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     rollout = config.ppo.n_steps * config.n_envs
     if config.ppo.batch_size > rollout:
         raise reader.error("ppo.batch_size", f"{config.ppo.batch_size} exceeds the rollout size "
+                           f"n_steps x n_envs = {rollout}")
+    warmup_batch = config.ppo.warmup.batch_size
+    if warmup_batch is not None and warmup_batch > rollout:
+        raise reader.error("ppo.warmup.batch_size", f"{warmup_batch} exceeds the rollout size "
                            f"n_steps x n_envs = {rollout}")
     n_steps, batch_size = config.ppo.n_steps, config.ppo.batch_size
     for index, stage in enumerate(curriculum.stages):  # overrides stay in force until changed

@@ -115,13 +115,16 @@ def build_model(config: RunConfig, venv):
         seed=config.seed, device=config.device, verbose=0)
 
 
-def effective_ppo(base: PpoConfig, curriculum: Curriculum, stage_index: int) -> dict[str, Any]:
-    """PPO settings in force at a stage: the run's, then each stage's overrides in order up
-    to this one (an override stays until a later stage changes it). The learning rate, which
-    may decay with env steps, comes from :func:`learning_rate_at`."""
-    settings = {k: getattr(base, k) for k in ("n_steps", "batch_size", "clip_range", "ent_coef")}
+def effective_ppo(base: PpoConfig, curriculum: Curriculum, stage_index: int, step: int) -> dict[str, Any]:
+    """PPO settings in force at a stage and env step: the run's, then each stage's overrides
+    in order up to this one (an override stays until a later stage changes it), then the
+    run's warm-up while it lasts. The learning rate, which may decay with env steps, comes
+    from :func:`learning_rate_at`."""
+    settings = {k: getattr(base, k) for k in ("n_steps", "batch_size", "n_epochs", "clip_range", "ent_coef")}
     for stage in curriculum.stages[: stage_index + 1]:
         settings.update({k: v for k, v in stage.ppo.as_dict().items() if k in settings})
+    if base.warmup.active(step):
+        settings.update({k: v for k in ("batch_size", "n_epochs") if (v := getattr(base.warmup, k)) is not None})
     return settings
 
 
@@ -140,7 +143,7 @@ def learning_rate_at(config: RunConfig, state: "CurriculumState", step: int) -> 
 
 
 def apply_ppo_settings(model, settings: dict[str, Any], learning_rate: float) -> None:
-    """Set learning rate, clip range, entropy coefficient, batch size and rollout length."""
+    """Set learning rate, clip range, entropy coefficient, batch size, epochs and rollout length."""
     from stable_baselines3.common.utils import ConstantSchedule
 
     # Our loop runs ``learn`` one rollout at a time, so SB3's progress-based schedules
@@ -150,6 +153,7 @@ def apply_ppo_settings(model, settings: dict[str, Any], learning_rate: float) ->
     model.clip_range = ConstantSchedule(settings["clip_range"])
     model.ent_coef = settings["ent_coef"]
     model.batch_size = settings["batch_size"]
+    model.n_epochs = settings["n_epochs"]
     if settings["n_steps"] != model.n_steps:
         model.n_steps = settings["n_steps"]
         buffer = model.rollout_buffer
@@ -421,8 +425,9 @@ class CurriculumTrainer:
 
     def apply_ppo_settings(self) -> None:
         """Give the model the PPO settings in force at the current stage and step."""
-        apply_ppo_settings(self.model, effective_ppo(self.config.ppo, self.config.curriculum, self.state.stage_index),
-                           learning_rate_at(self.config, self.state, int(self.model.num_timesteps)))
+        step = int(self.model.num_timesteps)
+        apply_ppo_settings(self.model, effective_ppo(self.config.ppo, self.config.curriculum, self.state.stage_index, step),
+                           learning_rate_at(self.config, self.state, step))
 
     def run(self, max_wall_s: float | None = None) -> CurriculumState:
         """Train until the curriculum completes or stops, the step budget is spent, or a

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from curricula.schema import ConfigError, LearningRateDecay, load_curriculum, load_run_config
+from curricula.schema import ConfigError, LearningRateDecay, PpoWarmup, load_curriculum, load_run_config
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -165,3 +165,27 @@ def test_learning_rate_decay_falls_log_linearly_then_holds():
     assert decay.at(500) == pytest.approx(1e-4)  # halfway in steps: the geometric mean
     assert decay.at(250) == pytest.approx(1e-3 * 10 ** -0.5)
     assert decay.at(1000) == pytest.approx(1e-5) and decay.at(10**9) == pytest.approx(1e-5)
+
+
+def test_ppo_warmup_is_read_and_checked(tmp_path):
+    write(tmp_path, GOOD_CURRICULUM, "cur.yaml")
+    base = "curriculum: cur.yaml\nn_envs: 2\nppo: {n_steps: 64, batch_size: 64, warmup: WARMUP}\n"
+    config = load_run_config(write(tmp_path, base.replace("WARMUP", "{steps: 5000, n_epochs: 20}"), "run.yaml"))
+    assert config.ppo.warmup == PpoWarmup(steps=5000, batch_size=None, n_epochs=20)
+    assert config.ppo.warmup.active(4999) and not config.ppo.warmup.active(5000)
+    assert load_run_config(write(tmp_path, base.replace(", warmup: WARMUP", ""), "plain.yaml")).ppo.warmup.steps == 0
+    cases = {
+        "{batch_size: 32}": "ppo.warmup: a warm-up needs steps",
+        "{steps: 100, epochs: 3}": "ppo.warmup.epochs: unknown key (did you mean 'n_epochs'?); allowed: steps, batch_size, n_epochs",
+        "{steps: 100, batch_size: 256}": "ppo.warmup.batch_size: 256 exceeds the rollout size n_steps x n_envs = 128",
+        "{steps: 100, n_epochs: 0}": "ppo.warmup.n_epochs: must be >= 1",
+        "{steps: -5}": "ppo.warmup.steps: must be >= 0",
+    }
+    for warmup, expected in cases.items():
+        path = write(tmp_path, base.replace("WARMUP", warmup), "bad.yaml")
+        with pytest.raises(ConfigError) as error:
+            load_run_config(path)
+        assert str(error.value).startswith(f"{path}: ") and expected in str(error.value), warmup
+    overridden = load_run_config(write(tmp_path, base.replace(", warmup: WARMUP", ""), "plain.yaml"),
+                                 ("ppo.warmup.steps=300", "ppo.warmup.batch_size=32"))
+    assert overridden.ppo.warmup == PpoWarmup(steps=300, batch_size=32)

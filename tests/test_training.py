@@ -51,6 +51,22 @@ def test_two_stage_run_advances_and_records_everything(tmp_path):
     assert latest_checkpoint(run).model == checkpoint_files(run / "checkpoints", state.num_timesteps).model
 
 
+def test_ppo_warmup_trains_with_its_settings_then_hands_over_across_a_resume(tmp_path):
+    config = write_config(tmp_path, total=100_000)
+    text = config.read_text().replace("n_epochs: 1}", "n_epochs: 1, warmup: {steps: 128, batch_size: 32, n_epochs: 3}}")
+    config.write_text(text)
+    run = tmp_path / "run"
+    # The first rollout (2 envs x 64 steps) falls inside the warm-up: 3 epochs of batches of 32.
+    trainer = CurriculumTrainer.start(config, run_dir=run, progress=False)
+    assert trainer.run(max_wall_s=1e-9).num_timesteps == 128
+    assert (trainer.model.batch_size, trainer.model.n_epochs, trainer.model._n_updates) == (32, 3, 3)
+    # From step 128 on, the run's own settings: one epoch of batches of 64.
+    resumed = CurriculumTrainer.resume(run, progress=False)
+    assert (resumed.model.batch_size, resumed.model.n_epochs) == (64, 1)
+    assert resumed.run(max_wall_s=1e-9).num_timesteps == 256
+    assert resumed.model._n_updates == 4
+
+
 def test_crash_mid_write_leaves_previous_checkpoint_loadable(tmp_path):
     config = write_config(tmp_path, total=512)
     run = tmp_path / "run"
