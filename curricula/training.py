@@ -124,7 +124,8 @@ def effective_ppo(base: PpoConfig, curriculum: Curriculum, stage_index: int, ste
     for stage in curriculum.stages[: stage_index + 1]:
         settings.update({k: v for k, v in stage.ppo.as_dict().items() if k in settings})
     if base.warmup.active(step):
-        settings.update({k: v for k in ("batch_size", "n_epochs") if (v := getattr(base.warmup, k)) is not None})
+        settings.update({k: v for k in ("n_steps", "batch_size", "n_epochs")
+                         if (v := getattr(base.warmup, k)) is not None})
     return settings
 
 
@@ -450,7 +451,6 @@ class CurriculumTrainer:
 
         for sig in previous:
             signal.signal(sig, request_stop)
-        rollout = model.n_steps * model.n_envs
         started, start_steps, start_wall = time.perf_counter(), model.num_timesteps, state.wall_s
         try:
             self._announce_stage(bar)
@@ -464,6 +464,7 @@ class CurriculumTrainer:
                               f"`python train.py --resume {self.run_dir}`")
                     break
                 self.apply_ppo_settings()  # a decaying learning rate moves on every rollout
+                rollout = model.n_steps * model.n_envs
                 steps_before, started_at, env_before = model.num_timesteps, time.perf_counter(), self.env_clock.seconds
                 model.learn(total_timesteps=rollout, callback=collector, reset_num_timesteps=False,
                             log_interval=1)
@@ -473,7 +474,6 @@ class CurriculumTrainer:
                 self.timings.append(RolloutTiming(
                     model.num_timesteps - steps_before, finished_at - started_at,
                     self.env_clock.seconds - env_before, finished_at - ended if ended else 0.0))
-                rollout = model.n_steps * model.n_envs
                 self._after_rollout(collector, bar)
                 if collector.stop_requested:
                     state.status = "interrupted"

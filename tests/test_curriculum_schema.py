@@ -171,13 +171,14 @@ def test_ppo_warmup_is_read_and_checked(tmp_path):
     write(tmp_path, GOOD_CURRICULUM, "cur.yaml")
     base = "curriculum: cur.yaml\nn_envs: 2\nppo: {n_steps: 64, batch_size: 64, warmup: WARMUP}\n"
     config = load_run_config(write(tmp_path, base.replace("WARMUP", "{steps: 5000, n_epochs: 20}"), "run.yaml"))
-    assert config.ppo.warmup == PpoWarmup(steps=5000, batch_size=None, n_epochs=20)
+    assert config.ppo.warmup == PpoWarmup(steps=5000, n_steps=None, batch_size=None, n_epochs=20)
     assert config.ppo.warmup.active(4999) and not config.ppo.warmup.active(5000)
     assert load_run_config(write(tmp_path, base.replace(", warmup: WARMUP", ""), "plain.yaml")).ppo.warmup.steps == 0
     cases = {
         "{batch_size: 32}": "ppo.warmup: a warm-up needs steps",
-        "{steps: 100, epochs: 3}": "ppo.warmup.epochs: unknown key (did you mean 'n_epochs'?); allowed: steps, batch_size, n_epochs",
-        "{steps: 100, batch_size: 256}": "ppo.warmup.batch_size: 256 exceeds the rollout size n_steps x n_envs = 128",
+        "{steps: 100, epochs: 3}": "ppo.warmup.epochs: unknown key (did you mean 'n_epochs'?); allowed: steps, n_steps, batch_size, n_epochs",
+        "{steps: 100, batch_size: 256}": "ppo.warmup.batch_size: 256 exceeds the warm-up's rollout size n_steps x n_envs = 128",
+        "{steps: 100, n_steps: 16}": "ppo.warmup.batch_size: 64 exceeds the warm-up's rollout size n_steps x n_envs = 32",
         "{steps: 100, n_epochs: 0}": "ppo.warmup.n_epochs: must be >= 1",
         "{steps: -5}": "ppo.warmup.steps: must be >= 0",
     }

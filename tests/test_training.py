@@ -52,19 +52,22 @@ def test_two_stage_run_advances_and_records_everything(tmp_path):
 
 
 def test_ppo_warmup_trains_with_its_settings_then_hands_over_across_a_resume(tmp_path):
-    config = write_config(tmp_path, total=100_000)
-    text = config.read_text().replace("n_epochs: 1}", "n_epochs: 1, warmup: {steps: 128, batch_size: 32, n_epochs: 3}}")
-    config.write_text(text)
+    # Stage 1 is not passed here, so the settings after the warm-up are the run config's.
+    config = write_config(tmp_path, total=100_000, curriculum=CURRICULUM.replace("threshold: 0.01", "threshold: 0.99"))
+    warmup = "warmup: {steps: 64, n_steps: 32, batch_size: 32, n_epochs: 3}"
+    config.write_text(config.read_text().replace("n_epochs: 1}", f"n_epochs: 1, {warmup}}}"))
     run = tmp_path / "run"
-    # The first rollout (2 envs x 64 steps) falls inside the warm-up: 3 epochs of batches of 32.
+    # The first rollout (2 envs x 32 steps) is the warm-up: 3 epochs of batches of 32.
     trainer = CurriculumTrainer.start(config, run_dir=run, progress=False)
-    assert trainer.run(max_wall_s=1e-9).num_timesteps == 128
-    assert (trainer.model.batch_size, trainer.model.n_epochs, trainer.model._n_updates) == (32, 3, 3)
-    # From step 128 on, the run's own settings: one epoch of batches of 64.
+    assert trainer.run(max_wall_s=1e-9).num_timesteps == 64
+    model = trainer.model
+    assert (model.n_steps, model.batch_size, model.n_epochs, model._n_updates) == (32, 32, 3, 3)
+    # From step 64 on, the run's own settings: rollouts of 2 x 64 steps, one epoch of batches of 64.
     resumed = CurriculumTrainer.resume(run, progress=False)
-    assert (resumed.model.batch_size, resumed.model.n_epochs) == (64, 1)
-    assert resumed.run(max_wall_s=1e-9).num_timesteps == 256
-    assert resumed.model._n_updates == 4
+    assert resumed.run(max_wall_s=1e-9).num_timesteps == 64 + 128
+    model = resumed.model
+    assert (model.n_steps, model.rollout_buffer.buffer_size, model.batch_size, model.n_epochs) == (64, 64, 64, 1)
+    assert model._n_updates == 4
 
 
 def test_crash_mid_write_leaves_previous_checkpoint_loadable(tmp_path):
