@@ -119,11 +119,10 @@ class PolicyConfig:
 @dataclass(frozen=True)
 class PpoWarmup:
     """More gradient work per sample for the run's first ``steps`` env steps: shorter rollouts
-    (more frequent updates), smaller minibatches and/or more epochs while the policy is new and
-    every sample teaches much, then
-    the run's (and stages') own settings. None: keep the value the run would otherwise use.
+    (more frequent updates), smaller minibatches and/or more epochs while the policy is new,
+    then the run's (and stages') own settings. None: keep the value the run would otherwise use.
 
-    YAML, under ``ppo``: ``warmup: {steps: 150000, batch_size: 128, n_epochs: 10}``.
+    YAML, under ``ppo``: ``warmup: {steps: 150000, n_steps: 16, batch_size: 128, n_epochs: 10}``.
     """
 
     steps: int = 0
@@ -449,7 +448,8 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
         raise reader.error("ppo.batch_size", f"{config.ppo.batch_size} exceeds the rollout size "
                            f"n_steps x n_envs = {rollout}")
     warmup = config.ppo.warmup
-    warmup_batch, warmup_rollout = warmup.batch_size or config.ppo.batch_size, (warmup.n_steps or config.ppo.n_steps) * config.n_envs
+    warmup_batch = warmup.batch_size or config.ppo.batch_size
+    warmup_rollout = (warmup.n_steps or config.ppo.n_steps) * config.n_envs
     if warmup.steps and warmup_batch > warmup_rollout:
         raise reader.error("ppo.warmup.batch_size", f"{warmup_batch} exceeds the warm-up's rollout size "
                            f"n_steps x n_envs = {warmup_rollout}")

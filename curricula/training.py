@@ -463,7 +463,7 @@ class CurriculumTrainer:
                     bar.write(f"time limit of {max_wall_s:.0f} s reached; continue with "
                               f"`python train.py --resume {self.run_dir}`")
                     break
-                self.apply_ppo_settings()  # a decaying learning rate moves on every rollout
+                self.apply_ppo_settings()  # a decaying rate or a warm-up's end acts between rollouts
                 rollout = model.n_steps * model.n_envs
                 steps_before, started_at, env_before = model.num_timesteps, time.perf_counter(), self.env_clock.seconds
                 model.learn(total_timesteps=rollout, callback=collector, reset_num_timesteps=False,
