@@ -6,6 +6,13 @@ its rollout buffer cuts sequences at episode starts. A start can then only be a 
 first step: resetting those sequences' initial states and running the LSTM once over the whole
 sequence computes the same function, several times faster. Anything else falls back to the
 step-by-step loop.
+
+``action_mean_bound`` (off by default, as in sb3-contrib) keeps the Gaussian's mean within
+``bound * tanh(mean / bound)``. The action space is [-1, 1] and the env clips actions, so a
+mean beyond the bounds gets no gradient from the returns and can drift: trained policies reach
+means of 100+ on a few muscles, where a small relative change is a huge step in log-probability
+(PPO's approximate KL reads 1e4-1e6). Near zero the map is the identity, so a new policy acts
+as before.
 """
 
 from __future__ import annotations
@@ -15,7 +22,22 @@ from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
 
 
 class SequenceLstmPolicy(RecurrentActorCriticPolicy):
-    """``MlpLstmPolicy`` (same networks, same parameters) with the whole-sequence fast path."""
+    """``MlpLstmPolicy`` (same networks, same parameters) with the whole-sequence fast path
+    and an optional soft bound on the action mean."""
+
+    def __init__(self, *args, action_mean_bound: float = 0.0, **kwargs):
+        self.action_mean_bound = action_mean_bound
+        super().__init__(*args, **kwargs)
+
+    def _get_constructor_parameters(self) -> dict:
+        return {**super()._get_constructor_parameters(), "action_mean_bound": self.action_mean_bound}
+
+    def _get_action_dist_from_latent(self, latent_pi: th.Tensor):
+        if not self.action_mean_bound:
+            return super()._get_action_dist_from_latent(latent_pi)
+        bound = self.action_mean_bound
+        mean_actions = bound * th.tanh(self.action_net(latent_pi) / bound)
+        return self.action_dist.proba_distribution(mean_actions, self.log_std)
 
     @staticmethod
     def _process_sequence(features: th.Tensor, lstm_states: tuple[th.Tensor, th.Tensor],

@@ -114,6 +114,9 @@ class PolicyConfig:
     # One LSTM call per sequence in updates (same function, faster); false: sb3-contrib's
     # step-by-step loop, kept to reproduce the reference setup's speed.
     fast_lstm_update: bool = True
+    # Soft bound on the Gaussian's mean, bound * tanh(mean / bound) (curricula/policy.py);
+    # 0: unbounded, as in sb3-contrib. Needs fast_lstm_update.
+    action_mean_bound: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -439,6 +442,9 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     if "output_dir" in raw:
         values["output_dir"] = Path(reader.string("output_dir", raw["output_dir"]))
     values["policy"] = _dataclass_from(reader, "policy", raw.get("policy"), PolicyConfig)
+    if values["policy"].action_mean_bound and not values["policy"].fast_lstm_update:
+        raise reader.error("policy.action_mean_bound", "needs policy.fast_lstm_update: true "
+                           "(the bound lives in the fast policy class)")
     values["ppo"] = _dataclass_from(reader, "ppo", raw.get("ppo"), PpoConfig)
     values["normalize"] = _dataclass_from(reader, "normalize", raw.get("normalize"), NormalizeConfig)
     curriculum = load_curriculum(curriculum_path)

@@ -106,6 +106,8 @@ def build_model(config: RunConfig, venv):
         "log_std_init": policy.log_std_init,
         "ortho_init": policy.ortho_init,
     }
+    if policy.fast_lstm_update:
+        policy_kwargs["action_mean_bound"] = policy.action_mean_bound
     return RecurrentPPO(
         SequenceLstmPolicy if policy.fast_lstm_update else "MlpLstmPolicy", venv,
         learning_rate=learning_rate_at(config, CurriculumState(), step=0), n_steps=ppo.n_steps,

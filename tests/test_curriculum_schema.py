@@ -119,6 +119,9 @@ def test_run_config_errors(tmp_path):
         "seed: 1\n": "curriculum: missing",
         good.replace("batch_size: 64", "batch_size: 512"): "ppo.batch_size: 512 exceeds the rollout size",
         good + "ppo: {gamma: 1.5}\n": "ppo.gamma: must be <= 1",
+        good + "policy: {action_mean_bound: -1}\n": "policy.action_mean_bound: must be >= 0",
+        good + "policy: {action_mean_bound: 1.5, fast_lstm_update: false}\n":
+            "policy.action_mean_bound: needs policy.fast_lstm_update: true",
     }
     for text, expected in cases.items():
         path = write(tmp_path, text, "bad.yaml")

@@ -54,6 +54,33 @@ def test_fast_policy_gives_the_same_losses_on_a_real_rollout():
     th.testing.assert_close(f_log_prob, log_prob, rtol=1e-5, atol=1e-5)
 
 
+def test_action_mean_bound_limits_the_mean_and_survives_save_and_load(tmp_path):
+    from sb3_contrib import RecurrentPPO
+
+    env = DummyVecEnv([lambda: BaodingEnv(rsi_probability=1.0, direction="hold", period="static")])
+    kwargs = {"lstm_hidden_size": 16, "net_arch": [16], "action_mean_bound": 1.5}
+    model = RecurrentPPO(SequenceLstmPolicy, env, n_steps=16, batch_size=16, seed=3, policy_kwargs=kwargs)
+    policy = model.policy
+    obs = th.as_tensor(env.reset()).float()
+    states = (th.zeros(1, 1, 16), th.zeros(1, 1, 16))
+
+    def mean_for_bias(bias: float) -> th.Tensor:
+        with th.no_grad():
+            policy.action_net.weight.zero_()
+            policy.action_net.bias.fill_(bias)
+            distribution, _ = policy.get_distribution(obs, states, th.ones(1))
+        return distribution.distribution.mean
+
+    # 1.5 * tanh(x / 1.5): about the identity near zero, never beyond the bound.
+    th.testing.assert_close(mean_for_bias(0.05), th.full((1, 39), 1.5 * np.tanh(0.05 / 1.5)))
+    assert abs(1.5 * np.tanh(0.05 / 1.5) - 0.05) < 1e-4
+    th.testing.assert_close(mean_for_bias(100.0), th.full((1, 39), 1.5))
+    th.testing.assert_close(mean_for_bias(-100.0), th.full((1, 39), -1.5))
+    model.save(tmp_path / "model")
+    loaded = RecurrentPPO.load(tmp_path / "model")
+    assert isinstance(loaded.policy, SequenceLstmPolicy) and loaded.policy.action_mean_bound == 1.5
+
+
 def test_thread_vec_env_equals_dummy_vec_env():
     factories = [lambda: BaodingEnv("p2") for _ in range(5)]
     threaded, dummy = ThreadVecEnv(factories, n_threads=2), DummyVecEnv(factories)
