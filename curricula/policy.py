@@ -7,8 +7,8 @@ first step: resetting those sequences' initial states and running the LSTM once 
 sequence computes the same function, several times faster. Anything else falls back to the
 step-by-step loop.
 
-``action_mean_bound`` (off by default, as in sb3-contrib) keeps the Gaussian's mean within
-``bound * tanh(mean / bound)``. The action space is [-1, 1] and the env clips actions, so a
+``action_mean_bound`` (off by default, as in sb3-contrib) replaces the Gaussian's mean by
+``bound * tanh(mean / bound)``, so it stays within +-bound. The action space is [-1, 1] and the env clips actions, so a
 mean beyond the bounds gets no gradient from the returns and can drift: trained policies reach
 means of 100+ on a few muscles, where a small relative change is a huge step in log-probability
 (PPO's approximate KL reads 1e4-1e6). Near zero the map is the identity, so a new policy acts
