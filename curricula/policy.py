@@ -13,6 +13,11 @@ mean beyond the bounds gets no gradient from the returns and can drift: trained 
 means of 100+ on a few muscles, where a small relative change is a huge step in log-probability
 (PPO's approximate KL reads 1e4-1e6). Near zero the map is the identity, so a new policy acts
 as before.
+
+``action_head_lr_scale`` (1 by default) computes the mean as ``scale * action_net(latent)``
+with ``action_net``'s initial parameters divided by ``scale``: the same initial policy, but
+since Adam moves each parameter by about the learning rate whatever its gradient's size, the
+output layer of the actor learns ``scale`` times as fast as the rest.
 """
 
 from __future__ import annotations
@@ -22,21 +27,27 @@ from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
 
 
 class SequenceLstmPolicy(RecurrentActorCriticPolicy):
-    """``MlpLstmPolicy`` (same networks, same parameters) with the whole-sequence fast path
-    and an optional soft bound on the action mean."""
+    """``MlpLstmPolicy`` (same networks, same parameters) with the whole-sequence fast path,
+    an optional soft bound on the action mean and an optional learning-rate scale for the
+    actor's output layer."""
 
-    def __init__(self, *args, action_mean_bound: float = 0.0, **kwargs):
+    def __init__(self, *args, action_mean_bound: float = 0.0, action_head_lr_scale: float = 1.0, **kwargs):
         self.action_mean_bound = action_mean_bound
+        self.action_head_lr_scale = action_head_lr_scale
         super().__init__(*args, **kwargs)
+        with th.no_grad():  # the same initial function as without the scale
+            self.action_net.weight.div_(action_head_lr_scale)
+            self.action_net.bias.div_(action_head_lr_scale)
 
     def _get_constructor_parameters(self) -> dict:
-        return {**super()._get_constructor_parameters(), "action_mean_bound": self.action_mean_bound}
+        return {**super()._get_constructor_parameters(), "action_mean_bound": self.action_mean_bound,
+                "action_head_lr_scale": self.action_head_lr_scale}
 
     def _get_action_dist_from_latent(self, latent_pi: th.Tensor):
-        if not self.action_mean_bound:
-            return super()._get_action_dist_from_latent(latent_pi)
-        bound = self.action_mean_bound
-        mean_actions = bound * th.tanh(self.action_net(latent_pi) / bound)
+        mean_actions = self.action_net(latent_pi) * self.action_head_lr_scale
+        if self.action_mean_bound:
+            bound = self.action_mean_bound
+            mean_actions = bound * th.tanh(mean_actions / bound)
         return self.action_dist.proba_distribution(mean_actions, self.log_std)
 
     @staticmethod

@@ -117,6 +117,9 @@ class PolicyConfig:
     # Soft bound on the Gaussian's mean, bound * tanh(mean / bound) (curricula/policy.py);
     # 0: unbounded, as in sb3-contrib. Needs fast_lstm_update.
     action_mean_bound: float = 0.0
+    # The actor's output layer learns this many times as fast as the rest (> 0; through a
+    # reparametrization, curricula/policy.py). Needs fast_lstm_update.
+    action_head_lr_scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -287,7 +290,7 @@ def _dataclass_from(reader: _Reader, key: str, raw: Any, cls: type, defaults: An
             values[name] = _ppo_warmup(reader, path, value)
         else:
             values[name] = reader.number(path, value, low=0, strict_low=name in (
-                "learning_rate", "clip_range", "max_grad_norm", "clip_obs", "clip_reward"))
+                "learning_rate", "clip_range", "max_grad_norm", "clip_obs", "clip_reward", "action_head_lr_scale"))
     return type(base)(**{**{f.name: getattr(base, f.name) for f in fields(cls)}, **values})
 
 
@@ -442,9 +445,10 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     if "output_dir" in raw:
         values["output_dir"] = Path(reader.string("output_dir", raw["output_dir"]))
     values["policy"] = _dataclass_from(reader, "policy", raw.get("policy"), PolicyConfig)
-    if values["policy"].action_mean_bound and not values["policy"].fast_lstm_update:
-        raise reader.error("policy.action_mean_bound", "needs policy.fast_lstm_update: true "
-                           "(the bound lives in the fast policy class)")
+    for key, default in (("action_mean_bound", 0.0), ("action_head_lr_scale", 1.0)):
+        if getattr(values["policy"], key) != default and not values["policy"].fast_lstm_update:
+            raise reader.error(f"policy.{key}", "needs policy.fast_lstm_update: true "
+                               "(it lives in the fast policy class)")
     values["ppo"] = _dataclass_from(reader, "ppo", raw.get("ppo"), PpoConfig)
     values["normalize"] = _dataclass_from(reader, "normalize", raw.get("normalize"), NormalizeConfig)
     curriculum = load_curriculum(curriculum_path)

@@ -108,6 +108,7 @@ def build_model(config: RunConfig, venv):
     }
     if policy.fast_lstm_update:
         policy_kwargs["action_mean_bound"] = policy.action_mean_bound
+        policy_kwargs["action_head_lr_scale"] = policy.action_head_lr_scale
     return RecurrentPPO(
         SequenceLstmPolicy if policy.fast_lstm_update else "MlpLstmPolicy", venv,
         learning_rate=learning_rate_at(config, CurriculumState(), step=0), n_steps=ppo.n_steps,

@@ -122,6 +122,9 @@ def test_run_config_errors(tmp_path):
         good + "policy: {action_mean_bound: -1}\n": "policy.action_mean_bound: must be >= 0",
         good + "policy: {action_mean_bound: 1.5, fast_lstm_update: false}\n":
             "policy.action_mean_bound: needs policy.fast_lstm_update: true",
+        good + "policy: {action_head_lr_scale: 0}\n": "policy.action_head_lr_scale: must be > 0",
+        good + "policy: {action_head_lr_scale: 0.1, fast_lstm_update: false}\n":
+            "policy.action_head_lr_scale: needs policy.fast_lstm_update: true",
     }
     for text, expected in cases.items():
         path = write(tmp_path, text, "bad.yaml")

@@ -82,6 +82,41 @@ def test_action_mean_bound_limits_the_mean_and_survives_save_and_load(tmp_path):
     assert isinstance(loaded.policy, SequenceLstmPolicy) and loaded.policy.action_mean_bound == 1.5
 
 
+def test_action_head_lr_scale_keeps_the_initial_policy_and_scales_only_the_heads_step():
+    from stable_baselines3.common.utils import ConstantSchedule
+
+    env = BaodingEnv(rsi_probability=1.0, direction="hold", period="static")
+    obs = th.as_tensor(env.reset(seed=0)[0]).float().unsqueeze(0)
+    actions = th.full((1, 39), 0.3)
+    states = (th.zeros(1, 1, 16), th.zeros(1, 1, 16))
+
+    def one_adam_step(scale: float) -> tuple[th.Tensor, th.Tensor, dict[str, th.Tensor]]:
+        th.manual_seed(0)
+        policy = SequenceLstmPolicy(env.observation_space, env.action_space, ConstantSchedule(1e-3),
+                                    lstm_hidden_size=16, net_arch=[16], action_head_lr_scale=scale)
+        before = {name: p.detach().clone() for name, p in policy.named_parameters()}
+        distribution, _ = policy.get_distribution(obs, states, th.ones(1))
+        mean = distribution.distribution.mean.detach()
+        (-distribution.log_prob(actions).sum()).backward()
+        head_gradient = policy.action_net.weight.grad.clone()
+        policy.optimizer.step()
+        # the head's weights as they act on the mean: scale * stored weights
+        steps = {name: (p.detach() - before[name]) * (scale if name == "action_net.weight" else 1.0)
+                 for name, p in policy.named_parameters()}
+        return mean, head_gradient, steps
+
+    mean, gradient, steps = one_adam_step(1.0)
+    scaled_mean, _, scaled_steps = one_adam_step(0.1)
+    th.testing.assert_close(scaled_mean, mean)  # the same policy before training
+    # Adam's first step moves each weight by the learning rate whatever its gradient's size,
+    # so the head's effective step shrinks by the scale; the layers below see the same gradient.
+    clear = gradient.abs() > 1e-3
+    assert clear.sum() > 100
+    th.testing.assert_close(scaled_steps["action_net.weight"][clear], 0.1 * steps["action_net.weight"][clear])
+    assert steps["action_net.weight"][clear].abs().min() > 0.9e-3
+    th.testing.assert_close(scaled_steps["lstm_actor.weight_hh_l0"], steps["lstm_actor.weight_hh_l0"])
+
+
 def test_thread_vec_env_equals_dummy_vec_env():
     factories = [lambda: BaodingEnv("p2") for _ in range(5)]
     threaded, dummy = ThreadVecEnv(factories, n_threads=2), DummyVecEnv(factories)
