@@ -44,6 +44,8 @@ class SequenceLstmPolicy(RecurrentActorCriticPolicy):
                 "action_head_lr_scale": self.action_head_lr_scale}
 
     def _get_action_dist_from_latent(self, latent_pi: th.Tensor):
+        if not self.action_mean_bound and self.action_head_lr_scale == 1.0:
+            return super()._get_action_dist_from_latent(latent_pi)
         mean_actions = self.action_net(latent_pi) * self.action_head_lr_scale
         if self.action_mean_bound:
             bound = self.action_mean_bound

@@ -290,7 +290,8 @@ def _dataclass_from(reader: _Reader, key: str, raw: Any, cls: type, defaults: An
             values[name] = _ppo_warmup(reader, path, value)
         else:
             values[name] = reader.number(path, value, low=0, strict_low=name in (
-                "learning_rate", "clip_range", "max_grad_norm", "clip_obs", "clip_reward", "action_head_lr_scale"))
+                "learning_rate", "clip_range", "max_grad_norm", "clip_obs", "clip_reward",
+                "action_head_lr_scale"))
     return type(base)(**{**{f.name: getattr(base, f.name) for f in fields(cls)}, **values})
 
 
