@@ -82,7 +82,7 @@ def test_action_mean_bound_limits_the_mean_and_survives_save_and_load(tmp_path):
     assert isinstance(loaded.policy, SequenceLstmPolicy) and loaded.policy.action_mean_bound == 1.5
 
 
-def test_action_head_lr_scale_keeps_the_initial_policy_and_scales_only_the_heads_step():
+def test_action_head_lr_scale_keeps_the_initial_policy_and_scales_only_the_heads_step(tmp_path):
     from stable_baselines3.common.utils import ConstantSchedule
 
     env = BaodingEnv(rsi_probability=1.0, direction="hold", period="static")
@@ -90,10 +90,27 @@ def test_action_head_lr_scale_keeps_the_initial_policy_and_scales_only_the_heads
     actions = th.full((1, 39), 0.3)
     states = (th.zeros(1, 1, 16), th.zeros(1, 1, 16))
 
-    def one_adam_step(scale: float) -> tuple[th.Tensor, th.Tensor, dict[str, th.Tensor]]:
+    def new_policy(scale: float) -> SequenceLstmPolicy:
         th.manual_seed(0)
-        policy = SequenceLstmPolicy(env.observation_space, env.action_space, ConstantSchedule(1e-3),
-                                    lstm_hidden_size=16, net_arch=[16], action_head_lr_scale=scale)
+        return SequenceLstmPolicy(env.observation_space, env.action_space, ConstantSchedule(1e-3),
+                                  lstm_hidden_size=16, net_arch=[16], action_head_lr_scale=scale)
+
+    def mean_of(policy: SequenceLstmPolicy) -> th.Tensor:
+        with th.no_grad():
+            return policy.get_distribution(obs, states, th.ones(1))[0].distribution.mean
+
+    # saved and loaded, a model keeps the scale and acts the same (no second division)
+    from sb3_contrib import RecurrentPPO
+
+    model = RecurrentPPO(SequenceLstmPolicy, DummyVecEnv([lambda: env]), n_steps=16, batch_size=16, seed=3,
+                         policy_kwargs={"lstm_hidden_size": 16, "net_arch": [16], "action_head_lr_scale": 0.1})
+    model.save(tmp_path / "model")
+    loaded = RecurrentPPO.load(tmp_path / "model")
+    assert loaded.policy.action_head_lr_scale == 0.1
+    th.testing.assert_close(mean_of(loaded.policy), mean_of(model.policy))
+
+    def one_adam_step(scale: float) -> tuple[th.Tensor, th.Tensor, dict[str, th.Tensor]]:
+        policy = new_policy(scale)
         before = {name: p.detach().clone() for name, p in policy.named_parameters()}
         distribution, _ = policy.get_distribution(obs, states, th.ones(1))
         mean = distribution.distribution.mean.detach()
