@@ -41,6 +41,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    from curricula.schema import load_run_config
+
+    try:
+        # Check the config before torch and MuJoCo load, so a typo is reported at once.
+        if args.resume:
+            load_run_config(args.resume / "config.yaml")
+        else:
+            load_run_config(args.config, tuple(args.overrides))
+    except (ConfigError, FileNotFoundError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     from curricula.training import CurriculumTrainer
 
     try:

@@ -15,7 +15,7 @@ from typing import Any
 
 import yaml
 
-from envs import TASKS
+from envs.task_specs import TASK_SPECS
 
 
 class ConfigError(ValueError):
@@ -192,12 +192,17 @@ VEC_ENVS = ("thread", "dummy", "subproc")
 # -- low-level readers -------------------------------------------------------------------
 
 class _Reader:
-    """Reads values out of one YAML file, raising errors that name the file and key path."""
+    """Reads values out of one YAML file, raising errors that name the file and key path, or
+    the ``--set`` override a bad value came from."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        self.overrides: dict[str, str] = {}  # dotted key -> the --set assignment that set it
 
     def error(self, key: str, message: str) -> ConfigError:
+        for dotted, assignment in self.overrides.items():
+            if key and (key == dotted or key.startswith(dotted + ".") or dotted.startswith(key + ".")):
+                return ConfigError(f"--set {assignment}: {key}: {message}")
         where = f"{self.path}: {key}: " if key else f"{self.path}: "
         return ConfigError(where + message)
 
@@ -348,14 +353,19 @@ def _advance_rule(reader: _Reader, key: str, raw: Any) -> AdvanceRule | None:
 
 def _stage_env(reader: _Reader, key: str, task: str, knobs: Mapping[str, Any]) -> dict[str, Any]:
     """Check a stage's merged knobs against the task's env; return them as given."""
-    env_cls = TASKS[task]
+    spec = TASK_SPECS[task]
     knobs = dict(knobs)
-    reader.mapping(key, knobs, ("preset", *env_cls.KNOBS))
+    reader.mapping(key, knobs, ("preset", *spec.knob_help))
     try:
-        env_cls.validate_knobs(**knobs)
+        spec.parse_knobs(**knobs)
     except ValueError as error:
         raise reader.error(key, str(error)) from None
     return knobs
+
+
+def stage_label(index: int, name: str | None = None) -> str:
+    """How errors and the console name a stage: counted from 1, with its name."""
+    return f"stage {index + 1}" + (f" ({name})" if name else "")
 
 
 def load_curriculum(path: str | Path) -> Curriculum:
@@ -369,24 +379,25 @@ def load_curriculum(path: str | Path) -> Curriculum:
     raw = reader.mapping("", _load_yaml(path, "curriculum"), ("name", "task", "defaults", "stages"))
     if not raw:
         raise reader.error("", "the curriculum file is empty")
-    task = reader.choice("task", raw.get("task", "baoding"), tuple(TASKS))
+    task = reader.choice("task", raw.get("task", "baoding"), tuple(TASK_SPECS))
     name = reader.string("name", raw.get("name", path.stem))
-    defaults = reader.mapping("defaults", raw.get("defaults"), ("preset", *TASKS[task].KNOBS))
+    defaults = reader.mapping("defaults", raw.get("defaults"), ("preset", *TASK_SPECS[task].knob_help))
     stages_raw = raw.get("stages")
     if not isinstance(stages_raw, list) or not stages_raw:
         raise reader.error("stages", "expected a non-empty list of stages")
     stages, seen = [], set()
     for index, stage_raw in enumerate(stages_raw):
-        key = f"stages[{index}]"
+        key = stage_label(index)  # stages count from 1, as on the console
         stage_raw = reader.mapping(key, stage_raw, ("name", "env", "advance", "ppo"))
-        stage_name = reader.string(f"{key}.name", stage_raw.get("name", f"stage_{index + 1}"))
+        stage_name = reader.string(f"{key} name", stage_raw.get("name", f"stage_{index + 1}"))
         if stage_name in seen:
-            raise reader.error(f"{key}.name", f"duplicate stage name {stage_name!r}")
+            raise reader.error(f"{key} name", f"duplicate stage name {stage_name!r}")
         seen.add(stage_name)
-        overrides = reader.mapping(f"{key}.env", stage_raw.get("env"), ("preset", *TASKS[task].KNOBS))
-        env = _stage_env(reader, f"{key}.env", task, {**defaults, **overrides})
-        advance = _advance_rule(reader, f"{key}.advance", stage_raw.get("advance"))
-        ppo = _dataclass_from(reader, f"{key}.ppo", stage_raw.get("ppo"), PpoOverrides)
+        key = stage_label(index, stage_name)
+        overrides = reader.mapping(f"{key} env", stage_raw.get("env"), ("preset", *TASK_SPECS[task].knob_help))
+        env = _stage_env(reader, f"{key} env", task, {**defaults, **overrides})
+        advance = _advance_rule(reader, f"{key} advance", stage_raw.get("advance"))
+        ppo = _dataclass_from(reader, f"{key} ppo", stage_raw.get("ppo"), PpoOverrides)
         stages.append(Stage(stage_name, env, advance, ppo))
     return Curriculum(name=name, task=task, stages=tuple(stages), path=path)
 
@@ -400,18 +411,20 @@ RUN_KEYS = ("curriculum", "seed", "n_envs", "vec_env", "env_threads", "device", 
 def _set_key(reader: _Reader, raw: dict[str, Any], assignment: str) -> None:
     """Apply one ``a.b=value`` override (value parsed as YAML) to the raw config."""
     if "=" not in assignment:
-        raise ConfigError(f"--set {assignment!r}: expected key=value, e.g. ppo.learning_rate=3e-4")
+        raise ConfigError(f"--set {assignment}: expected key=value, e.g. ppo.learning_rate=3e-4")
     dotted, text = assignment.split("=", 1)
     keys = dotted.strip().split(".")
+    reader.overrides[".".join(keys)] = assignment
+    reader.mapping("", {keys[0]: None}, RUN_KEYS)
     node = raw
     for depth, key in enumerate(keys[:-1]):
-        allowed = RUN_KEYS if depth == 0 else None
-        if allowed is not None and key not in allowed:
-            reader.mapping("", {key: None}, allowed)
         node = node.setdefault(key, {})
         if not isinstance(node, dict):
-            raise ConfigError(f"--set {assignment!r}: {'.'.join(keys[:depth + 1])} is not a mapping")
-    node[keys[-1]] = yaml.safe_load(text)
+            raise ConfigError(f"--set {assignment}: {'.'.join(keys[:depth + 1])} is not a mapping")
+    try:
+        node[keys[-1]] = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        raise ConfigError(f"--set {assignment}: not a valid YAML value: {error}") from None
 
 
 def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunConfig:
@@ -469,6 +482,6 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
         n_steps = stage.ppo.n_steps or n_steps
         batch_size = stage.ppo.batch_size or batch_size
         if batch_size > n_steps * config.n_envs:
-            raise ConfigError(f"{curriculum_path}: stages[{index}].ppo: batch_size {batch_size} exceeds the "
+            raise ConfigError(f"{curriculum_path}: {stage_label(index, stage.name)} ppo: batch_size {batch_size} exceeds the "
                               f"rollout size n_steps x n_envs = {n_steps} x {config.n_envs} of this run ({path})")
     return config

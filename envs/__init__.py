@@ -1,19 +1,33 @@
-"""MyoChallenge tasks on the ``mujoco`` bindings; importing registers the gymnasium ids."""
+"""MyoChallenge tasks on the ``mujoco`` bindings; importing registers the gymnasium ids.
+
+The env classes (and MuJoCo) load on first use, so the task knobs (``envs.task_specs``) can be
+read without them.
+"""
 
 import os
 
 # Headless offscreen rendering by default; mujoco reads this when it is first imported.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from gymnasium.envs.registration import register, registry
-
-from envs.baoding import BaodingEnv, BaodingTask
-from envs.die import DieEnv, DieTask
+from gymnasium.envs.registration import register, registry  # noqa: E402
 
 __all__ = ["BaodingEnv", "BaodingTask", "DieEnv", "DieTask", "TASKS"]
 
-# Task name (as written in curricula) -> env class.
-TASKS = {"baoding": BaodingEnv, "die": DieEnv}
+_LAZY = {"BaodingEnv": "envs.baoding", "BaodingTask": "envs.baoding_task", "DieEnv": "envs.die",
+         "DieTask": "envs.die_task"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    if name == "TASKS":  # task name (as written in curricula) -> env class
+        from envs.task_specs import TASK_SPECS
+
+        return {task: spec.env_class() for task, spec in TASK_SPECS.items()}
+    raise AttributeError(f"module 'envs' has no attribute {name!r}")
+
 
 _IDS = {
     "myosds/BaodingP1-v0": ("envs.baoding:BaodingEnv", {"preset": "p1"}),

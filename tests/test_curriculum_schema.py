@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -52,36 +53,36 @@ def test_good_curriculum_is_parsed_with_defaults_merged(tmp_path):
 @pytest.mark.parametrize("old,new,expected", [
     ("    advance: {metric: score, threshold: 0.1, window: 5}",
      "    advance: {metric: score, threshold: 1.5, window: 5}",
-     "stages[0].advance.threshold: must be <= 1"),
+     "stage 1 (a) advance.threshold: must be <= 1"),
     ("    advance: {metric: score, threshold: 0.1, window: 5}",
      "    advance: {metric: score, threshold: 0.1, windw: 5}",
-     "stages[0].advance.windw: unknown key (did you mean 'window'?); allowed: metric, threshold, window"),
+     "stage 1 (a) advance.windw: unknown key (did you mean 'window'?); allowed: metric, threshold, window"),
     ("    advance: {metric: score, threshold: 0.1, window: 5}",
      "    advance: {metric: succes, threshold: 0.1, window: 5}",
-     "stages[0].advance.metric: 'succes' is not one of score, survival"),
+     "stage 1 (a) advance.metric: 'succes' is not one of score, survival"),
     ("    advance: {metric: score, threshold: 0.1, window: 5}",
      "    advance: {metric: score, threshold: high, window: 5}",
-     "stages[0].advance.threshold: expected a number, got 'high'"),
+     "stage 1 (a) advance.threshold: expected a number, got 'high'"),
     ("    advance: {metric: score, threshold: 0.1, window: 5}",
      "    advance: {metric: score, threshold: 0.1, window: 2.5}",
-     "stages[0].advance.window: expected an integer"),
+     "stage 1 (a) advance.window: expected an integer"),
     ("    env: {solved_radius: 0.03}", "    env: {solved_radus: 0.03}",
-     "stages[0].env.solved_radus: unknown key (did you mean 'solved_radius'?)"),
+     "stage 1 (a) env.solved_radus: unknown key (did you mean 'solved_radius'?)"),
     ("    env: {solved_radius: 0.03}", "    env: {period: [20, 10]}",
-     "stages[0].env: period: range [20.0, 10.0] is reversed"),
+     "stage 1 (a) env: period: range [20.0, 10.0] is reversed"),
     ("    env: {solved_radius: 0.03}", "    env: {direction: up}",
-     "stages[0].env: direction: 'up' is not one of hold, cw, ccw, random"),
+     "stage 1 (a) env: direction: 'up' is not one of hold, cw, ccw, random"),
     ("task: baoding", "task: juggling", "task: 'juggling' is not one of baoding"),
-    ("  - name: b", "  - name: a", "stages[1].name: duplicate stage name 'a'"),
+    ("  - name: b", "  - name: a", "stage 2 name: duplicate stage name 'a'"),
     ("    ppo: {learning_rate: 1e-4, n_steps: 64}", "    ppo: {lr: 1e-4}",
-     "stages[1].ppo.lr: unknown key; allowed: learning_rate, n_steps, batch_size, clip_range, ent_coef"),
-    ("max_steps: 1000,", "max_steps: 50,", "stages[1].advance.max_steps: 50 is below min_steps 100"),
+     "stage 2 (b) ppo.lr: unknown key; allowed: learning_rate, n_steps, batch_size, clip_range, ent_coef"),
+    ("max_steps: 1000,", "max_steps: 50,", "stage 2 (b) advance.max_steps: 50 is below min_steps 100"),
     ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 1e-4},",
-     "stages[1].ppo.learning_rate: a learning-rate decay needs start, end, steps; missing: steps"),
+     "stage 2 (b) ppo.learning_rate: a learning-rate decay needs start, end, steps; missing: steps"),
     ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 1e-4, stesp: 10},",
-     "stages[1].ppo.learning_rate.stesp: unknown key (did you mean 'steps'?); allowed: start, end, steps"),
+     "stage 2 (b) ppo.learning_rate.stesp: unknown key (did you mean 'steps'?); allowed: start, end, steps"),
     ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 0, steps: 10},",
-     "stages[1].ppo.learning_rate.end: must be > 0, got 0"),
+     "stage 2 (b) ppo.learning_rate.end: must be > 0, got 0"),
 ])
 def test_bad_curriculum_names_file_key_and_allowed(tmp_path, old, new, expected):
     assert old in GOOD_CURRICULUM
@@ -136,7 +137,7 @@ def test_run_config_errors(tmp_path):
 def test_stage_batch_size_is_checked_against_the_run(tmp_path):
     write(tmp_path, GOOD_CURRICULUM.replace("n_steps: 64}", "n_steps: 64, batch_size: 256}"), "cur.yaml")
     path = write(tmp_path, "curriculum: cur.yaml\nn_envs: 2\nppo: {n_steps: 64, batch_size: 64}\n", "run.yaml")
-    with pytest.raises(ConfigError, match=r"stages\[1\].ppo: batch_size 256 exceeds the rollout size .* 64 x 2"):
+    with pytest.raises(ConfigError, match=r"stage 2 \(b\) ppo: batch_size 256 exceeds the rollout size .* 64 x 2"):
         load_run_config(path)
     assert load_run_config(path, ("n_envs=4",)).n_envs == 4
 
@@ -146,10 +147,24 @@ def test_set_overrides_are_checked_against_the_schema(tmp_path):
     path = write(tmp_path, "curriculum: cur.yaml\nppo: {n_steps: 64, batch_size: 64}\n", "run.yaml")
     config = load_run_config(path, ("ppo.learning_rate=3e-4", "n_envs=2", "policy.net_arch=[32, 32]"))
     assert config.ppo.learning_rate == 3e-4 and config.n_envs == 2 and config.policy.net_arch == (32, 32)
-    with pytest.raises(ConfigError, match="ppo.learning_rat: unknown key"):
-        load_run_config(path, ("ppo.learning_rat=3e-4",))
+    # An error in an override names the override, not the file (which has no such key).
+    with pytest.raises(ConfigError) as error:
+        load_run_config(path, ("ppo.lerning_rate=1e-4",))
+    assert str(error.value) == ("--set ppo.lerning_rate=1e-4: ppo.lerning_rate: unknown key (did you mean "
+                                "'learning_rate'?); allowed: learning_rate, n_steps, batch_size, n_epochs, gamma, "
+                                "gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm, warmup")
+    with pytest.raises(ConfigError, match=r"^--set n_env=2: n_env: unknown key \(did you mean 'n_envs'\?\)"):
+        load_run_config(path, ("n_env=2",))
+    with pytest.raises(ConfigError, match=r"^--set ppo.gamma=2: ppo.gamma: must be <= 1, got 2"):
+        load_run_config(path, ("ppo.gamma=2",))
+    with pytest.raises(ConfigError, match=r"^--set ppo.n_steps=6.5: ppo.n_steps: expected an integer"):
+        load_run_config(path, ("ppo.n_steps=6.5",))
     with pytest.raises(ConfigError, match="expected key=value"):
         load_run_config(path, ("ppo.learning_rate",))
+    # A bad value in the file is still the file's, even when another key is overridden.
+    bad_file = write(tmp_path, "curriculum: cur.yaml\nppo: {n_steps: 64, batch_size: 64, gamma: 3}\n", "bad.yaml")
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(bad_file))}: ppo.gamma: must be <= 1"):
+        load_run_config(bad_file, ("ppo.learning_rate=3e-4",))
 
 
 def test_learning_rate_decay_is_read_from_configs_stages_and_overrides(tmp_path):

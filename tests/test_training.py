@@ -195,7 +195,7 @@ def test_bad_config_fails_before_training(tmp_path):
     process = run_train(["--config", str(tmp_path / "run.yaml"), "--run-dir", str(tmp_path / "run")], tmp_path)
     output, _ = process.communicate(timeout=120)
     assert process.returncode == 2
-    assert "curriculum.yaml: stages[0].advance.threshold: must be <= 1, got 2" in output
+    assert "curriculum.yaml: stage 1 (easy) advance.threshold: must be <= 1, got 2" in output
     assert "Traceback" not in output
     assert not (tmp_path / "run").exists()
 
