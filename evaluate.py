@@ -29,11 +29,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--load-last-checkpoint", action="store_true", help="a run's newest checkpoint, not its final model")
     parser.add_argument("--json", type=Path, help="write the numbers (and per-episode results) here")
     parser.add_argument("--plots", type=Path, metavar="DIR", help="learning curve and score histogram PNGs")
-    parser.add_argument("--video", type=Path, metavar="FILE", help="MP4 of the first episodes on our env")
-    parser.add_argument("--video-episodes", type=int, default=2)
+    parser.add_argument("--video", type=Path, metavar="FILE",
+                        help="MP4 of the best and worst episodes of the first evaluation, replayed on our env")
+    parser.add_argument("--video-episodes", type=int, default=2, help="episodes in the video: half best, half worst")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")
+    if args.video_episodes < 1:
+        parser.error("--video-episodes must be >= 1")
     return args
 
 
@@ -73,8 +76,9 @@ def main(argv: list[str] | None = None) -> int:
                     ev.plot_learning_curve(ref.run_dir, path)
                     print(f"wrote {path}")
         if args.video:
-            frames = ev.record_video(refs[0], choices[0][0], args.video, args.video_episodes, args.seed)
-            print(f"wrote {args.video} ({frames} frames)")
+            picks = ev.chosen_episodes(reports[0], args.video_episodes)
+            frames = ev.record_video(refs[0], choices[0][0], args.video, picks)
+            print(f"wrote {args.video} ({frames} frames: {'; '.join(f'{c} (seed {s})' for s, c in picks)})")
     except (ev.EvaluationError, ConfigError, RuntimeError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

@@ -277,7 +277,8 @@ def _official_direction(env) -> str | None:
 
 
 def run_episode(policy: LoadedPolicy, env, choice: EnvChoice, seed: int, frames: list | None = None) -> EpisodeResult:
-    """One deterministic episode; the LSTM state starts fresh."""
+    """One deterministic episode; the LSTM state starts fresh. With ``frames``, each step's
+    rendered image and whether the step was solved are appended to it."""
     obs, _ = env.reset(seed=seed)
     state, start = None, True
     solved = length = 0
@@ -287,7 +288,7 @@ def run_episode(policy: LoadedPolicy, env, choice: EnvChoice, seed: int, frames:
         start = False
         obs, _, terminated, truncated, info = env.step(action)
         if frames is not None:
-            frames.append(env.render())
+            frames.append((env.render(), bool(info["solved"])))
         length += 1
         solved += int(bool(info["solved"]))
         effort -= float(info["act_reg"])
@@ -326,19 +327,63 @@ def evaluate(ref: CheckpointRef, choice: EnvChoice, episodes: int, seed: int = 0
     return EvaluationReport(ref, choice, seed, results)
 
 
-def record_video(ref: CheckpointRef, choice: EnvChoice, path: Path, episodes: int = 2, seed: int = 0) -> int:
-    """Render ``episodes`` episodes of our env to an MP4 (40 fps: real time); return the frame count."""
+def chosen_episodes(report: EvaluationReport, count: int) -> list[tuple[int, str]]:
+    """Seeds and captions of the evaluation's best and worst episodes (by score, then length),
+    best first: ``count`` episodes, half of them the best ones."""
+    episodes = report.episodes
+    order = sorted(range(len(episodes)), key=lambda i: (episodes[i].score, episodes[i].length))
+    best = order[::-1][: count - count // 2]
+    worst = [i for i in order if i not in best][: count // 2]
+    total = len(episodes)
+    picks = [(i, f"best of {total}") for i in best] + [(i, f"worst of {total}") for i in worst[::-1]]
+    return [(report.seed + i, caption) for i, caption in picks]
+
+
+VIDEO_FPS = 40  # the control rate of the Baoding env: real time
+HOLD_LAST_FRAME_S = 2.0  # each episode's last frame stays this long, with its result
+
+
+def _overlay(frame: np.ndarray, lines: list[str]) -> np.ndarray:
+    from PIL import Image, ImageDraw, ImageFont
+
+    image = Image.fromarray(frame)
+    draw = ImageDraw.Draw(image)
+    try:
+        font = ImageFont.load_default(size=18)
+    except TypeError:  # Pillow < 10.1 has one bitmap size
+        font = ImageFont.load_default()
+    y = 8
+    for line in lines:
+        draw.text((10, y), line, fill=(255, 255, 255), font=font, stroke_width=2, stroke_fill=(0, 0, 0))
+        y += 24
+    return np.asarray(image)
+
+
+def record_video(ref: CheckpointRef, choice: EnvChoice, path: Path, episodes: list[tuple[int, str]]) -> int:
+    """Render the given ``(seed, caption)`` episodes of our env to an MP4 at real time, with an
+    overlay (caption, step, solved, score so far); each episode's last frame is held for
+    :data:`HOLD_LAST_FRAME_S` with its result. Returns the frame count."""
     import imageio
 
     policy = load_policy(ref, choice.task)
     env = _make_env(EnvChoice(choice.task, choice.name, choice.knobs, official=False), render=True)
     frames: list[np.ndarray] = []
-    for i in range(episodes):
-        run_episode(policy, env, choice, seed + i, frames)
+    for number, (seed, caption) in enumerate(episodes, start=1):
+        steps: list[tuple[np.ndarray, bool]] = []
+        result = run_episode(policy, env, choice, seed, steps)
+        solved = 0
+        title = f"episode {number}/{len(episodes)}: {caption} (seed {seed})"
+        for step, (image, solved_now) in enumerate(steps, start=1):
+            solved += solved_now
+            frames.append(_overlay(image, [title, f"step {step}/{result.horizon}",
+                                           f"solved: {'yes' if solved_now else 'no'}",
+                                           f"score so far {solved / result.horizon:.3f}"]))
+        ending = f"balls dropped at step {result.length}" if result.dropped else "episode complete"
+        last = _overlay(steps[-1][0], [title, ending, f"score {result.score:.3f}"])
+        frames += [last] * int(HOLD_LAST_FRAME_S * VIDEO_FPS)
     env.close()
     path.parent.mkdir(parents=True, exist_ok=True)
-    imageio.mimwrite(path, frames, fps=env.metadata["render_fps"], codec="libx264", quality=7,
-                     macro_block_size=16)
+    imageio.mimwrite(path, frames, fps=VIDEO_FPS, codec="libx264", quality=7, macro_block_size=16)
     return len(frames)
 
 
@@ -377,20 +422,33 @@ def plot_learning_curve(run_dir: Path, path: Path, window: int = 50) -> None:
     fig, axes = plt.subplots(2 if by_phase else 1, 1, figsize=(9, 8 if by_phase else 4.5), sharex=True, squeeze=False)
     ax = axes[0, 0]
     if len(rows):
-        ax.plot(steps, trailing_mean(scores, window), label=f"score (mean of last {window} episodes)")
-        ax.plot(steps, trailing_mean(survival, window), label="no-drop rate", alpha=0.7)
+        ax.plot(steps, trailing_mean(scores, window), color="C0", label=f"score (mean of last {window} episodes)")
     state_file = run_dir / STATE_FILE
     history = json.loads(state_file.read_text()).get("history", []) if state_file.is_file() else []
     for entry in history:
         ax.axvline(entry["at_step"], color="gray", linestyle="--", linewidth=1)
         ax.text(entry["at_step"], 0.98, f" {entry['stage']} {entry['decision']}", rotation=90,
                 va="top", ha="right", fontsize=7, transform=ax.get_xaxis_transform())
+    # Each stage's threshold over the steps it ran (the current stage's up to the last episode).
+    thresholds = _stage_thresholds(run_dir, history, int(steps[-1]) if len(rows) else 0)
+    for index, (start, end, threshold) in enumerate(thresholds):
+        ax.hlines(threshold, start, end, colors="C3", linestyles=":", linewidth=1.5,
+                  label="stage threshold" if index == 0 else None)
     axes[-1, 0].set_xlabel("env steps")
-    ax.set_ylabel("training episodes")
-    top = max([0.1] + [float(v) for v in (scores.max() if len(rows) else 0, survival.max() if len(rows) else 0)])
-    ax.set_ylim(0, min(1.0, 1.25 * top))  # low early scores stay readable
-    ax.set_title(f"{run_dir.name}: training episodes by stage")
-    ax.legend(loc="best", fontsize=8)
+    ax.set_ylabel("score of training episodes")
+    top = max([0.1, float(scores.max()) if len(rows) else 0.0] + [t for _, _, t in thresholds])
+    ax.set_ylim(0, min(1.0, 1.15 * top))
+    # The drop rate on its own axis, so it shows even when every episode drops (1.0) or none does.
+    drops = ax.twinx()
+    if len(rows):
+        drops.plot(steps, 1.0 - trailing_mean(survival, window), color="C1", alpha=0.8, label="drop rate")
+    drops.set_ylim(-0.02, 1.05)
+    drops.set_ylabel("drop rate", color="C1")
+    fig.suptitle(f"{run_dir.name}: training episodes by stage")
+    handles = ax.get_legend_handles_labels()
+    extra = drops.get_legend_handles_labels()
+    ax.legend(handles[0] + extra[0], handles[1] + extra[1], loc="lower left", bbox_to_anchor=(0, 1.0), ncol=3,
+              fontsize=8, frameon=False)
     if by_phase:
         sectors = np.array([phase_sector(float(p)) if p else -1 for p in phases])
         below = axes[1, 0]
@@ -409,17 +467,43 @@ def plot_learning_curve(run_dir: Path, path: Path, window: int = 50) -> None:
     plt.close(fig)
 
 
+def _stage_thresholds(run_dir: Path, history: list[dict[str, Any]], last_step: int) -> list[tuple[int, int, float]]:
+    """``(first step, last step, threshold)`` of each stage the run has been in that has one."""
+    from curricula.schema import ConfigError, load_curriculum
+
+    try:
+        stages = load_curriculum(run_dir / "curriculum.yaml").stages
+    except ConfigError:
+        return []
+    bounds = [0] + [entry["at_step"] for entry in history]
+    reached = len(history) + 1 if len(history) < len(stages) else len(history)
+    spans = []
+    for index in range(min(reached, len(stages))):
+        rule = stages[index].advance
+        end = bounds[index + 1] if index + 1 < len(bounds) else max(last_step, bounds[index])
+        if rule is not None:
+            spans.append((bounds[index], end, rule.threshold))
+    return spans
+
+
 def plot_score_histogram(reports: Sequence[EvaluationReport], path: Path) -> None:
+    """Episode scores of each report, as outlines over bins fitted to the data, each mean marked."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4))
-    bins = np.linspace(0, 1, 21)
-    for report in reports:
-        ax.hist([e.score for e in report.episodes], bins=bins, alpha=0.6,
-                label=f"{report.checkpoint.label} on {report.env.label}")
+    scores = [np.array([e.score for e in report.episodes]) for report in reports]
+    top = max([0.01] + [float(s.max()) for s in scores if len(s)])
+    bins = np.linspace(0, top * 1.05, 21)
+    colors = plt.get_cmap("tab10")
+    for index, (report, values) in enumerate(zip(reports, scores)):
+        color = colors(index % 10)
+        # Earlier series drawn wider, so a later one with the same counts leaves them visible.
+        ax.hist(values, bins=bins, histtype="step", linewidth=1.5 + 2.0 * (len(reports) - 1 - index), color=color,
+                label=f"{report.checkpoint.label} on {report.env.label} (mean {values.mean():.3f})")
+        ax.axvline(values.mean(), color=color, linestyle="--", linewidth=1)
     ax.set_xlabel("episode score (solved steps / horizon)")
     ax.set_ylabel("episodes")
     ax.legend(fontsize=7)

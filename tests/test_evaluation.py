@@ -120,9 +120,25 @@ def test_cli_writes_json_plots_and_video(run_dir, tmp_path):
     assert iio.imread(out / f"learning_curve_{run_dir.name}.png").shape[:2] == (800, 900)
 
     frames = iio.imread(out / "v.mp4")
-    lengths = [e["length"] for e in report["per_episode"][:2]]  # the video shows episodes seed, seed+1
-    assert frames.shape == (sum(lengths), 480, 640, 3)
+    # The video replays the best and the worst of the 3 episodes, each followed by its last frame
+    # held for 2 s at 40 fps.
+    ranked = sorted(report["per_episode"], key=lambda e: (e["score"], e["length"]))
+    assert frames.shape == (ranked[-1]["length"] + ranked[0]["length"] + 2 * 80, 480, 640, 3)
     assert frames.std() > 10  # an actual picture, not a blank frame
+    assert "best of 3" in result.stdout and "worst of 3" in result.stdout
+
+
+def test_video_episodes_are_the_best_and_the_worst():
+    from envs.metrics import EpisodeResult
+
+    scores = [0.2, 0.9, 0.0, 0.5, 0.0]
+    report = ev.EvaluationReport(None, None, seed=100, episodes=[
+        EpisodeResult(solved_steps=int(s * 200), length=200 if s else 10 + i, horizon=200, dropped=not s, effort=0.0)
+        for i, s in enumerate(scores)])
+    # Best first; among equal scores the shorter episode is the worse one.
+    assert ev.chosen_episodes(report, 2) == [(101, "best of 5"), (102, "worst of 5")]
+    assert ev.chosen_episodes(report, 3) == [(101, "best of 5"), (103, "best of 5"), (102, "worst of 5")]
+    assert [seed for seed, _ in ev.chosen_episodes(report, 10)] == [101, 103, 100, 104, 102]
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
