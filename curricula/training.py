@@ -13,7 +13,9 @@ import json
 import math
 import multiprocessing
 import os
+import pickle
 import platform
+import random
 import signal
 import sys
 import time
@@ -37,7 +39,8 @@ from curricula.schema import (
     Stage,
     load_run_config,
 )
-from envs import TASKS
+from curricula.threads import UpdateThreads, available_cpus
+from envs.task_specs import TASK_SPECS
 from envs.metrics import EpisodeResult
 
 STATE_FILE = "curriculum_state.json"
@@ -61,7 +64,7 @@ def _make_env(task: str, knobs: dict[str, Any], seed: int) -> Callable[[], Any]:
             # Ctrl-C goes to the whole process group: let the main process save and stop
             # the workers, instead of the workers dying mid-step.
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-        env = TASKS[task](**knobs)
+        env = TASK_SPECS[task].env_class()(**knobs)
         env.reset(seed=seed)
         return env
     return build
@@ -227,33 +230,40 @@ def _atomic_write_text(path: Path, text: str) -> None:
 
 # -- callback ----------------------------------------------------------------------------
 
-class EpisodeCollector(BaseCallback):
-    """SB3 callback: gathers finished episodes of the current stage, logs reward terms,
-    drives the progress bar, and stops ``learn`` when a stop was requested."""
+class UpdateInterrupted(Exception):
+    """Raised between two minibatches of a PPO update when a stop was requested."""
 
-    def __init__(self, n_envs: int, stage_index: int, terms: tuple[str, ...], progress_bar: Any = None,
-                 update_threads: int = 1) -> None:
+
+class EpisodeCollector(BaseCallback):
+    """SB3 callback: gathers finished episodes of the current stage (with the env step and
+    the run's training wall time at which each ended), logs reward terms, drives the progress
+    bar, sets torch's threads for each phase, and stops ``learn`` when a stop was requested."""
+
+    def __init__(self, n_envs: int, stage_index: int, terms: tuple[str, ...], run_wall_s: Callable[[], float],
+                 update_threads: UpdateThreads) -> None:
         super().__init__(verbose=0)
+        self.run_wall_s = run_wall_s
         self.update_threads = update_threads
         self.rollout_ended_at: float | None = None  # None while a rollout is being collected
         self.terms = tuple(t for t in terms if t != "done")
         self.stage_index = stage_index
         self.episode_stage = [stage_index] * n_envs  # stage each env's current episode began in
-        self.results: list[tuple[int, EpisodeResult]] = []
+        self.results: list[tuple[int, float, EpisodeResult]] = []
         self.term_sums: dict[str, float] = {}
         self.term_count = 0
         self.stop_requested: str | None = None
-        self.progress_bar = progress_bar
+        self.progress_bar: Any = None
 
     def _on_step(self) -> bool:
         infos, dones = self.locals["infos"], self.locals["dones"]
+        wall_s = self.run_wall_s() if dones.any() else 0.0
         for rank, (info, done) in enumerate(zip(infos, dones)):
             for key in self.terms:
                 self.term_sums[key] = self.term_sums.get(key, 0.0) + info.get(key, 0.0)
             if done:
                 result = info.get("episode_result")
                 if result is not None and self.episode_stage[rank] == self.stage_index:
-                    self.results.append((self.num_timesteps, result))
+                    self.results.append((self.num_timesteps, wall_s, result))
                 self.episode_stage[rank] = self.stage_index
         self.term_count += len(infos)
         if self.progress_bar is not None:
@@ -263,18 +273,29 @@ class EpisodeCollector(BaseCallback):
     def _on_rollout_start(self) -> None:
         # Env threads need the cores while collecting; torch's idle OpenMP workers would
         # spin on them. Policy inference on a few dozen observations needs one thread.
-        import torch
-
-        torch.set_num_threads(1)
+        self._set_threads(1)
         self.rollout_ended_at = None
 
     def _on_rollout_end(self) -> None:
+        self.rollout_ended_at = time.perf_counter()
+        self._set_threads(self.update_threads.threads())
+
+    def before_optimizer_step(self, optimizer, args, kwargs) -> None:
+        """Optimizer pre-hook, once per minibatch: stop here if asked to (the weights and the
+        optimizer state stay those of the last finished minibatch); otherwise make room for
+        other processes that started using the CPUs during the update."""
+        if self.stop_requested:
+            raise UpdateInterrupted(self.stop_requested)
+        self._set_threads(self.update_threads.threads())
+
+    @staticmethod
+    def _set_threads(threads: int) -> None:
         import torch
 
-        self.rollout_ended_at = time.perf_counter()
-        torch.set_num_threads(self.update_threads)
+        if torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)
 
-    def pop_results(self) -> list[tuple[int, EpisodeResult]]:
+    def pop_results(self) -> list[tuple[int, float, EpisodeResult]]:
         results, self.results = self.results, []
         return results
 
@@ -337,6 +358,12 @@ class CurriculumTrainer:
         inner.step_async = self.env_clock.wrap(inner.step_async)
         inner.step_wait = self.env_clock.wrap(inner.step_wait)
         self.timings: list[RolloutTiming] = []
+        self.learn_started_at = time.perf_counter()
+        self.update_threads = UpdateThreads(available_cpus(), fixed=config.num_threads or None)
+        self.collector = EpisodeCollector(config.n_envs, state.stage_index, TASK_SPECS[config.curriculum.task].reward_terms,
+                                          run_wall_s=lambda: self.state.wall_s + time.perf_counter() - self.learn_started_at,
+                                          update_threads=self.update_threads)
+        self.minibatch_hook = model.policy.optimizer.register_step_pre_hook(self.collector.before_optimizer_step)
 
     # construction ------------------------------------------------------------------------
 
@@ -367,9 +394,6 @@ class CurriculumTrainer:
         (run_dir / "command.txt").write_text(" ".join(sys.argv) + "\n")
         (run_dir / "versions.json").write_text(json.dumps(_package_versions(), indent=2))
         set_random_seed(config.seed)
-        import torch
-
-        torch.set_num_threads(config.num_threads or os.cpu_count() or 1)
         stage = config.curriculum.stages[0]
         venv = build_vec_env(config, stage)
         model = build_model(config, venv)
@@ -386,9 +410,8 @@ class CurriculumTrainer:
         optimizer and normalization state, same TensorBoard folder. ``total_steps`` raises
         the run's step budget (recorded in its config.yaml), which also continues a run that
         ended at its budget."""
-        import torch
         from sb3_contrib import RecurrentPPO
-        from stable_baselines3.common.logger import configure
+        from stable_baselines3.common.logger import Logger
         from stable_baselines3.common.vec_env import VecNormalize
 
         run_dir = Path(run_dir)
@@ -410,12 +433,16 @@ class CurriculumTrainer:
             config = load_run_config(config_path, (f"total_steps={total_steps}",))
             config_path.write_text(yaml.safe_dump(dict(config.source), sort_keys=False))
         state.status = "running"
-        torch.set_num_threads(config.num_threads or os.cpu_count() or 1)
         stage = config.curriculum.stages[state.stage_index]
         venv = VecNormalize.load(str(checkpoint.vecnormalize), build_vec_env(config, stage).venv)
         venv.training = True
         model = RecurrentPPO.load(str(checkpoint.model), env=venv, device=config.device)
-        model.set_logger(configure(str(run_dir / "tb"), ["tensorboard"]))
+        # Loading reseeds torch, numpy and the envs' next reset with the run's seed: continue
+        # the streams of the checkpoint instead, so the resumed run draws new episodes.
+        restore_random_state(venv, checkpoint.random_state, fallback_seed=config.seed + state.num_timesteps)
+        # Events a killed run logged after this checkpoint are hidden from TensorBoard.
+        tb_folder = str(run_dir / "tb")
+        model.set_logger(Logger(tb_folder, [resumed_tensorboard_format(tb_folder, purge_step=state.num_timesteps + 1)]))
         _truncate_episode_log(run_dir / EPISODES_FILE, state.num_timesteps)
         trainer = cls(config, run_dir, state, model, venv, progress)
         trainer.apply_ppo_settings()
@@ -443,9 +470,8 @@ class CurriculumTrainer:
         bar = tqdm(total=config.total_steps, initial=model.num_timesteps, unit="step", dynamic_ncols=True,
                    disable=not self.show_progress, smoothing=0.1,
                    mininterval=0.5 if sys.stderr.isatty() else 30.0)
-        collector = EpisodeCollector(config.n_envs, state.stage_index,
-                                     TASKS[config.curriculum.task].REWARD_TERMS, bar,
-                                     update_threads=config.num_threads or os.cpu_count() or 1)
+        collector = self.collector
+        collector.progress_bar = bar
         previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
 
         def request_stop(signum, frame):
@@ -469,8 +495,12 @@ class CurriculumTrainer:
                 self.apply_ppo_settings()  # a decaying rate or a warm-up's end acts between rollouts
                 rollout = model.n_steps * model.n_envs
                 steps_before, started_at, env_before = model.num_timesteps, time.perf_counter(), self.env_clock.seconds
-                model.learn(total_timesteps=rollout, callback=collector, reset_num_timesteps=False,
-                            log_interval=1)
+                self.learn_started_at = started_at
+                try:
+                    model.learn(total_timesteps=rollout, callback=collector, reset_num_timesteps=False,
+                                log_interval=1)
+                except UpdateInterrupted:
+                    pass  # stopped between minibatches: weights and optimizer are consistent
                 finished_at = time.perf_counter()
                 state.wall_s += finished_at - started_at
                 ended = collector.rollout_ended_at  # None: a stop cut the rollout, no update ran
@@ -514,14 +544,14 @@ class CurriculumTrainer:
         rule = self.stage.advance
         metric = rule.metric if rule else "score"
         window = rule.window if rule else 100
-        self.progress.record((episode_metric(metric, r) for _, r in results), window)
+        self.progress.record((episode_metric(metric, r) for _, _, r in results), window)
         self.progress.steps = model.num_timesteps - state.stage_start_step
         self._log_episodes(results)
         logger = model.logger
         for key, value in collector.pop_term_means().items():
             logger.record(f"reward/{key}", value)
         if results:
-            episodes = [r for _, r in results]
+            episodes = [r for _, _, r in results]
             logger.record("rollout/score", float(np.mean([r.score for r in episodes])))
             logger.record("rollout/effort", float(np.mean([r.effort for r in episodes])))
             logger.record("rollout/drop_rate", float(np.mean([r.dropped for r in episodes])))
@@ -530,6 +560,7 @@ class CurriculumTrainer:
             logger.record("time/env_steps_per_s", timing.steps / timing.wall_s)
             logger.record("time/env_stepping_share", timing.env_s / timing.wall_s)
             logger.record("time/update_share", timing.update_s / timing.wall_s)
+        logger.record("time/update_threads", self.update_threads.current)
         logger.record("curriculum/stage_index", state.stage_index)
         logger.record("curriculum/stage_steps", self.progress.steps)
         if not math.isnan(self.progress.measured):
@@ -587,9 +618,9 @@ class CurriculumTrainer:
             writer = csv.writer(file)
             if new:
                 writer.writerow(EPISODE_COLUMNS)
-            for step, r in results:
+            for step, wall_s, r in results:
                 phase = "" if r.start_phase is None else f"{r.start_phase:.4f}"
-                writer.writerow((step, f"{self.state.wall_s:.2f}", self.state.stage_index, self.stage.name, f"{r.score:.6g}",
+                writer.writerow((step, f"{wall_s:.2f}", self.state.stage_index, self.stage.name, f"{r.score:.6g}",
                                  r.solved_steps, r.length, int(r.dropped), f"{r.effort:.6g}", r.direction,
                                  phase)[:n_columns])
 
@@ -608,6 +639,9 @@ class CurriculumTrainer:
         tmp_norm = self.checkpoint_dir / f".tmp_{files.vecnormalize.name}"
         self.venv.save(str(tmp_norm))
         os.replace(tmp_norm, files.vecnormalize)
+        tmp_random = self.checkpoint_dir / f".tmp_{files.random_state.name}"
+        tmp_random.write_bytes(pickle.dumps(capture_random_state(self.venv)))
+        os.replace(tmp_random, files.random_state)
         _atomic_write_text(files.state, self.state.to_json())
         _atomic_write_text(self.checkpoint_dir / LATEST_FILE, json.dumps({"steps": steps}))
         _atomic_write_text(self.run_dir / STATE_FILE, self.state.to_json())
@@ -628,22 +662,77 @@ class CurriculumTrainer:
 
 @dataclass(frozen=True)
 class CheckpointFiles:
+    """A checkpoint's files. The random state is optional: checkpoints written before it
+    existed resume with streams seeded from the run's seed and step count."""
+
     model: Path
     vecnormalize: Path
     state: Path
+    random_state: Path
 
     def __iter__(self):
-        return iter((self.model, self.vecnormalize, self.state))
+        return iter((self.model, self.vecnormalize, self.state, self.random_state))
 
     def complete(self) -> bool:
-        return all(path.is_file() for path in self)
+        return all(path.is_file() for path in (self.model, self.vecnormalize, self.state))
 
 
 def checkpoint_files(folder: Path, steps: int) -> CheckpointFiles:
-    """SB3's names for a checkpoint's model and statistics, plus our curriculum state."""
+    """SB3's names for a checkpoint's model and statistics, plus our curriculum state and the
+    random generators' states."""
     return CheckpointFiles(folder / f"rl_model_{steps}_steps.zip",
                            folder / f"rl_model_vecnormalize_{steps}_steps.pkl",
-                           folder / f"curriculum_state_{steps}_steps.json")
+                           folder / f"curriculum_state_{steps}_steps.json",
+                           folder / f"random_state_{steps}_steps.pkl")
+
+
+# -- random streams ----------------------------------------------------------------------
+
+def capture_random_state(venv) -> dict[str, Any]:
+    """Everything random that shapes the episodes and updates to come: each env's generator
+    (task draws at reset), and the global python, numpy (minibatch order) and torch (action
+    noise) generators."""
+    import torch
+
+    return {"envs": list(venv.get_attr("np_random")), "python": random.getstate(),
+            "numpy": np.random.get_state(), "torch": torch.get_rng_state()}
+
+
+def restore_random_state(venv, path: Path, fallback_seed: int) -> None:
+    """Continue the streams saved at ``path``; without that file (an older checkpoint), seed
+    every stream from ``fallback_seed`` instead, so a resume still draws new episodes. Either
+    way the envs' next reset draws from their own generators, not from the run's seed."""
+    import torch
+
+    venv.venv._reset_seeds()  # drop the seeds SB3's load queued for the next reset
+    if path.is_file():
+        saved = pickle.loads(path.read_bytes())
+        if len(saved["envs"]) == venv.num_envs:
+            for index, generator in enumerate(saved["envs"]):
+                venv.set_attr("np_random", generator, indices=[index])
+            random.setstate(saved["python"])
+            np.random.set_state(saved["numpy"])
+            torch.set_rng_state(saved["torch"])
+            return
+    from gymnasium.utils import seeding
+    from stable_baselines3.common.utils import set_random_seed
+
+    set_random_seed(fallback_seed)
+    for index in range(venv.num_envs):
+        venv.set_attr("np_random", seeding.np_random(fallback_seed * 1000 + index)[0], indices=[index])
+
+
+def resumed_tensorboard_format(folder: str, purge_step: int):
+    """SB3's TensorBoard writer, opened with ``purge_step``: TensorBoard then hides the events
+    at or after that step from earlier event files (those a killed run logged after the
+    checkpoint it is resumed from)."""
+    from stable_baselines3.common.logger import TensorBoardOutputFormat
+    from torch.utils.tensorboard import SummaryWriter
+
+    output = TensorBoardOutputFormat.__new__(TensorBoardOutputFormat)  # its __init__ takes no purge_step
+    output.writer = SummaryWriter(log_dir=folder, purge_step=purge_step)
+    output._is_closed = False
+    return output
 
 
 def checkpoint_steps(folder: Path) -> list[int]:
@@ -672,11 +761,24 @@ def _episode_log_header(path: Path) -> list[str]:
 
 
 def _truncate_episode_log(path: Path, max_step: int) -> None:
-    """Drop episodes logged after the checkpoint a resumed run restarts from."""
+    """Drop episodes logged after the checkpoint a resumed run restarts from, and a row that a
+    kill cut short; the file is replaced in one rename."""
     if not path.exists():
         return
     with path.open(newline="") as file:
         rows = list(csv.reader(file))
-    kept = [rows[0]] + [row for row in rows[1:] if int(row[0]) <= max_step]
-    with path.open("w", newline="") as file:
-        csv.writer(file).writerows(kept)
+    if not rows:
+        path.unlink()
+        return
+    header = rows[0]
+
+    def kept(row: list[str]) -> bool:
+        try:
+            return len(row) == len(header) and int(row[0]) <= max_step
+        except ValueError:
+            return False
+
+    tmp = path.with_name(f".{path.name}.tmp")
+    with tmp.open("w", newline="") as file:
+        csv.writer(file).writerows([header] + [row for row in rows[1:] if kept(row)])
+    os.replace(tmp, path)

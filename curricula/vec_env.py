@@ -8,7 +8,6 @@ fixed thread, so results do not depend on scheduling.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
@@ -16,18 +15,20 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from curricula.threads import available_cpus
+
 
 class ThreadVecEnv(DummyVecEnv):
     """DummyVecEnv whose ``step`` runs the envs in ``n_threads`` contiguous groups in parallel.
 
     Args:
         env_fns: one factory per env.
-        n_threads: worker threads; 0 means one per CPU core.
+        n_threads: worker threads; 0 means one per CPU this process may use.
     """
 
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], n_threads: int = 0) -> None:
         super().__init__(list(env_fns))
-        n_threads = n_threads or os.cpu_count() or 1
+        n_threads = n_threads or available_cpus()
         n_threads = max(1, min(n_threads, self.num_envs))
         bounds = np.linspace(0, self.num_envs, n_threads + 1).astype(int)
         self._groups = [range(bounds[i], bounds[i + 1]) for i in range(n_threads)]

@@ -1,0 +1,137 @@
+"""What long runs rely on: resumed runs draw new episodes, a SIGKILL loses only what came after
+the last checkpoint, Ctrl-C stops between minibatches, and config errors come before torch loads."""
+
+from __future__ import annotations
+
+import csv
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from curricula.training import CurriculumState, CurriculumTrainer, latest_checkpoint
+from tiny_run import CONFIG, CURRICULUM, write_config
+
+REPO = Path(__file__).resolve().parents[1]
+# Stage 1 never passes here, so every episode draws a random start phase from the same knobs.
+ONE_STAGE = CURRICULUM.replace("threshold: 0.01", "threshold: 0.99")
+
+
+def episode_rows(run: Path) -> list[dict[str, str]]:
+    with (run / "episodes.csv").open(newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def without_wall_time(rows: list[dict[str, str]]) -> list[tuple]:
+    return [tuple(v for k, v in row.items() if k != "wall_s") for row in rows]
+
+
+def test_resume_continues_the_random_streams_and_is_reproducible(tmp_path):
+    config = write_config(tmp_path, total=512, curriculum=ONE_STAGE)
+    first = tmp_path / "first"
+    CurriculumTrainer.start(config, run_dir=first, progress=False).run()
+    start_phases = {row["start_phase"] for row in episode_rows(first) if int(row["step"]) <= 256}
+    copies = [tmp_path / "a", tmp_path / "b"]
+    for copy in copies:
+        shutil.copytree(first, copy)
+        CurriculumTrainer.resume(copy, progress=False, total_steps=1024).run()
+    resumed = [[row for row in episode_rows(copy) if int(row["step"]) > 512] for copy in copies]
+    assert len(resumed[0]) >= 20
+    # Resuming the same checkpoint twice gives the same episodes ...
+    assert without_wall_time(resumed[0]) == without_wall_time(resumed[1])
+    # ... and they are new ones: none starts where the run's first episodes started.
+    assert not start_phases & {row["start_phase"] for row in resumed[0]}
+
+
+def test_each_episode_row_has_its_own_wall_time(tmp_path):
+    config = write_config(tmp_path, total=1024, curriculum=ONE_STAGE)
+    CurriculumTrainer.start(config, run_dir=tmp_path / "run", progress=False).run()
+    rows = episode_rows(tmp_path / "run")
+    walls = [float(row["wall_s"]) for row in rows]
+    assert walls == sorted(walls)
+    # 8 rollouts of 128 steps: one wall time per rollout would give at most 8 values.
+    assert len(set(walls)) > 3 * 8
+
+
+def read_scalars(folder: Path, tag: str) -> list[int]:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    accumulator = EventAccumulator(str(folder), size_guidance={"scalars": 0})
+    accumulator.Reload()
+    return [event.step for event in accumulator.Scalars(tag)]
+
+
+def test_resume_after_sigkill_continues_from_the_last_checkpoint_with_consistent_logs(tmp_path):
+    config = write_config(tmp_path, total=1_000_000, curriculum=ONE_STAGE)
+    config.write_text(config.read_text().replace("checkpoint_every: 256", "checkpoint_every: 1280"))
+    run = tmp_path / "run"
+    process = subprocess.Popen([sys.executable, str(REPO / "train.py"), "--config", str(config), "--run-dir", str(run),
+                                "--no-progress"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        # Kill it once it has logged episodes past a checkpoint (every 10 rollouts of 128 steps).
+        deadline = time.time() + 240
+        while time.time() < deadline:
+            checkpoint = latest_checkpoint(run)
+            rows = episode_rows(run) if checkpoint is not None else []
+            if rows and int(rows[-1]["step"]) > int(checkpoint.model.name.split("_")[2]) + 128:
+                break
+            time.sleep(0.05)
+        process.send_signal(signal.SIGKILL)
+    finally:
+        process.wait(timeout=60)
+    assert process.returncode == -signal.SIGKILL
+    saved = CurriculumState.from_json(latest_checkpoint(run).state.read_text())
+    before = episode_rows(run)
+    assert int(before[-1]["step"]) > saved.num_timesteps  # the kill lost episodes after the checkpoint
+    # The run folder's state is the checkpoint's: nothing after it was recorded as done.
+    assert CurriculumState.from_json((run / "curriculum_state.json").read_text()) == saved
+
+    total = saved.num_timesteps + 512
+    state = CurriculumTrainer.resume(run, progress=False, total_steps=total).run()
+    assert state.status == "budget_reached" and state.num_timesteps == total
+    after = episode_rows(run)
+    kept = [row for row in before if int(row["step"]) <= saved.num_timesteps]
+    assert after[: len(kept)] == kept  # nothing lost up to the checkpoint
+    new = after[len(kept):]
+    assert new and all(int(row["step"]) > saved.num_timesteps for row in new)  # no orphans from the killed run
+    steps = [int(row["step"]) for row in after]
+    assert steps == sorted(steps)
+    assert state.stage_episodes == len(after)  # the curriculum counted exactly the logged episodes
+    # TensorBoard shows one curve: the killed run's points after the checkpoint are purged.
+    logged = read_scalars(run / "tb", "curriculum/stage_steps")
+    assert logged == sorted(set(logged)) and logged[-1] == total
+
+
+def test_a_stop_during_an_update_ends_it_before_the_next_minibatch(tmp_path):
+    config = write_config(tmp_path, total=100_000, curriculum=ONE_STAGE)
+    config.write_text(config.read_text().replace("n_epochs: 1", "n_epochs: 50"))
+    run = tmp_path / "run"
+    trainer = CurriculumTrainer.start(config, run_dir=run, progress=False)
+    steps_taken = []
+
+    def count_and_signal_after_the_third(*args) -> None:
+        steps_taken.append(1)
+        if len(steps_taken) == 3:
+            trainer.collector.stop_requested = "SIGINT"  # what the SIGINT handler does
+
+    trainer.model.policy.optimizer.register_step_post_hook(count_and_signal_after_the_third)
+    state = trainer.run()
+    # 50 epochs of 2 minibatches were due; the stop came after the third.
+    assert state.status == "interrupted" and len(steps_taken) == 3
+    assert latest_checkpoint(run).model.name == f"rl_model_{state.num_timesteps}_steps.zip"
+    resumed = CurriculumTrainer.resume(run, progress=False, total_steps=state.num_timesteps + 128)
+    assert resumed.run().status == "budget_reached"
+
+
+def test_a_config_error_is_reported_before_torch_and_mujoco_load(tmp_path):
+    (tmp_path / "curriculum.yaml").write_text(CURRICULUM)
+    (tmp_path / "run.yaml").write_text(CONFIG.format(total=100))
+    code = ("import sys, train; code = train.main(['--config', 'run.yaml', '--set', 'ppo.lerning_rate=1e-4']); "
+            "print(code, 'torch' in sys.modules, 'mujoco' in sys.modules)")
+    result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60,
+                            env={"PYTHONPATH": str(REPO), "PATH": ""})
+    assert result.stdout.split() == ["2", "False", "False"], result.stderr
+    assert result.stderr.startswith("error: --set ppo.lerning_rate=1e-4: ppo.lerning_rate: unknown key "
+                                    "(did you mean 'learning_rate'?)")
