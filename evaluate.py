@@ -1,89 +1,11 @@
-"""Official MyoChallenge metrics of trained policies, on our env and on myosuite's own env.
+"""Official MyoChallenge metrics of trained policies (see myo_sds/cli/evaluate.py).
 
-    python evaluate.py runs/quickstart [--env p1|p2|stage:NAME] [--official] [--episodes 50]
-                       [--json out.json] [--plots out/] [--video out.mp4]
-    python evaluate.py runA runB/checkpoints/rl_model_200000_steps.zip   # side by side
+    python evaluate.py runs/quickstart --env p1 --official
 """
 
-from __future__ import annotations
-
-import argparse
-import json
-import os
 import sys
-from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede `import mujoco`
-
-
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("targets", nargs="+", type=Path, metavar="RUN_DIR_OR_CHECKPOINT")
-    parser.add_argument("--env", default="p1",
-                        help="p1 (default), p2, or stage:NAME of the run's curriculum; several comma-separated")
-    parser.add_argument("--official", action="store_true", help="also evaluate p1/p2 on myosuite's official env")
-    parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--seed", type=int, default=0, help="episode i is reset with seed + i")
-    parser.add_argument("--workers", type=int, default=1, help="parallel worker processes for the episodes")
-    parser.add_argument("--load-checkpoint", type=int, metavar="STEPS", help="a run's checkpoint at STEPS")
-    parser.add_argument("--load-last-checkpoint", action="store_true", help="a run's newest checkpoint, not its final model")
-    parser.add_argument("--json", type=Path, help="write the numbers (and per-episode results) here")
-    parser.add_argument("--plots", type=Path, metavar="DIR", help="learning curve and score histogram PNGs")
-    parser.add_argument("--video", type=Path, metavar="FILE",
-                        help="MP4 of the best and worst episodes of the first evaluation, replayed on our env")
-    parser.add_argument("--video-episodes", type=int, default=2, help="episodes in the video: half best, half worst")
-    args = parser.parse_args(argv)
-    if args.episodes < 1:
-        parser.error("--episodes must be >= 1")
-    if args.video_episodes < 1:
-        parser.error("--video-episodes must be >= 1")
-    return args
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
-    from curricula import evaluation as ev
-    from curricula.schema import ConfigError
-
-    try:
-        refs = [ev.resolve_checkpoint(t, args.load_checkpoint, args.load_last_checkpoint) for t in args.targets]
-        names = [name.strip() for name in args.env.split(",") if name.strip()]
-        choices = []
-        for ref in refs:
-            ref_choices = []
-            for name in names:
-                ref_choices.append(ev.choose_env(ref, name))
-                if args.official and not name.startswith("stage:"):
-                    ref_choices.append(ev.choose_env(ref, name, official=True))
-            choices.append(ref_choices)
-        reports = []
-        for ref, ref_choices in zip(refs, choices):
-            for choice in ref_choices:
-                print(f"evaluating {ref.label} on {choice.label}: {args.episodes} episodes ...", flush=True)
-                reports.append(ev.evaluate(ref, choice, args.episodes, args.seed, args.workers))
-        print()
-        print(ev.format_table(reports))
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps({"reports": [r.summary() for r in reports]}, indent=2))
-            print(f"\nwrote {args.json}")
-        if args.plots:
-            ev.plot_score_histogram(reports, args.plots / "score_histogram.png")
-            print(f"wrote {args.plots / 'score_histogram.png'}")
-            for ref in refs:
-                if ref.run_dir is not None:
-                    path = args.plots / f"learning_curve_{ref.run_dir.name}.png"
-                    ev.plot_learning_curve(ref.run_dir, path)
-                    print(f"wrote {path}")
-        if args.video:
-            picks = ev.chosen_episodes(reports[0], args.video_episodes)
-            frames = ev.record_video(refs[0], choices[0][0], args.video, picks)
-            print(f"wrote {args.video} ({frames} frames: {'; '.join(f'{c} (seed {s})' for s, c in picks)})")
-    except (ev.EvaluationError, ConfigError, RuntimeError) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    return 0
-
+from myo_sds.cli.evaluate import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -1,75 +1,12 @@
-"""Train a recurrent PPO policy through a YAML curriculum.
+"""Train a recurrent PPO policy through a YAML curriculum (see myo_sds/cli/train.py).
 
-    python train.py --config configs/quickstart.yaml [--set ppo.learning_rate=3e-4 ...]
-    python train.py --resume runs/quickstart-20261122-101500-s0 [--max-hours 8] [--total-steps N]
+    python train.py --config configs/quickstart.yaml
+    python train.py --resume RUN_DIR
 """
 
-from __future__ import annotations
-
-import argparse
 import sys
-from pathlib import Path
 
-from curricula.schema import ConfigError
-
-
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument("--config", type=Path, help="run config YAML (configs/*.yaml)")
-    source.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue this run from its latest checkpoint")
-    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a config value, e.g. --set n_envs=8 --set ppo.batch_size=256")
-    parser.add_argument("--seed", type=int, help="same as --set seed=N")
-    parser.add_argument("--n-envs", type=int, help="same as --set n_envs=N")
-    parser.add_argument("--total-steps", type=int,
-                        help="same as --set total_steps=N; with --resume, raises the run's step budget")
-    parser.add_argument("--run-dir", type=Path, help="run folder (default: a new one under output_dir)")
-    parser.add_argument("--overwrite", action="store_true", help="replace --run-dir if it exists")
-    parser.add_argument("--max-hours", type=float, metavar="H",
-                        help="stop after H hours of training in this call (checkpointed; --resume continues)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    args = parser.parse_args(argv)
-    if args.resume and (args.overrides or args.seed is not None or args.n_envs is not None or args.run_dir):
-        parser.error("--resume continues a run as configured; only --total-steps, --max-hours and "
-                     "--no-progress apply")
-    for flag, key in (("seed", "seed"), ("n_envs", "n_envs"), ("total_steps", "total_steps")):
-        if getattr(args, flag) is not None and not args.resume:
-            args.overrides.append(f"{key}={getattr(args, flag)}")
-    return args
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
-    from curricula.schema import load_run_config
-
-    try:
-        # Check the config before torch and MuJoCo load, so a typo is reported at once.
-        if args.resume:
-            load_run_config(args.resume / "config.yaml")
-        else:
-            load_run_config(args.config, tuple(args.overrides))
-    except (ConfigError, FileNotFoundError) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    from curricula.training import CurriculumTrainer
-
-    try:
-        if args.resume:
-            trainer = CurriculumTrainer.resume(args.resume, progress=not args.no_progress,
-                                               total_steps=args.total_steps)
-        else:
-            trainer = CurriculumTrainer.start(args.config, tuple(args.overrides), args.run_dir,
-                                              args.overwrite, progress=not args.no_progress)
-    except (ConfigError, FileNotFoundError) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    print(f"run folder: {trainer.run_dir}  (seed {trainer.config.seed})")
-    state = trainer.run(max_wall_s=args.max_hours * 3600 if args.max_hours is not None else None)
-    print(f"{state.status} at step {state.num_timesteps}, stage {state.stage_index + 1}/"
-          f"{len(trainer.config.curriculum.stages)} ({trainer.stage.name}); run folder: {trainer.run_dir}")
-    return 130 if state.status == "interrupted" else 0
-
+from myo_sds.cli.train import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -20,7 +20,7 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
-from envs import TASKS
+from myo_sds.envs import TASKS
 
 OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p2"): "myoChallengeBaodingP2-v1",
                 ("die", "p1"): "myoChallengeDieReorientP1-v0", ("die", "p2"): "myoChallengeDieReorientP2-v0"}

@@ -29,7 +29,6 @@ is already done is only read. Delete a run folder to start it afresh.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
 from typing import NamedTuple
@@ -46,7 +45,7 @@ WINDOW = 100
 
 def first_stage_curriculum(config: Path, folder: Path) -> Path:
     """A copy of the config's curriculum reduced to its first stage."""
-    from curricula.schema import load_run_config
+    from myo_sds.curricula.schema import load_run_config
 
     run = load_run_config(config)
     raw = yaml.safe_load(run.curriculum_path.read_text())
@@ -75,12 +74,14 @@ def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float 
           overrides: tuple[str, ...] = (), setup: str | None = None) -> dict:
     """Train (or continue, or only read) the run ``folder/<setup>_s<seed>`` up to ``budget``
     env steps and ``max_wall_s`` seconds of training in all, and return its result."""
-    from curricula.schema import load_run_config
-    from curricula.training import CurriculumState, CurriculumTrainer, latest_checkpoint
+    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.run_folder import RunFolder, RunStatus
+    from myo_sds.training import CurriculumTrainer
 
     setup = setup or config.stem
     run_dir = folder / f"{setup}_s{seed}"
-    checkpoint = latest_checkpoint(run_dir) if run_dir.is_dir() else None
+    run = RunFolder(run_dir)
+    checkpoint = run.latest_checkpoint() if run_dir.is_dir() else None
     if checkpoint is None:
         curriculum = first_stage_curriculum(config, folder)
         trainer = CurriculumTrainer.start(
@@ -88,29 +89,29 @@ def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float 
             run_dir=run_dir, overwrite=True, progress=False)
         state = trainer.run(max_wall_s=max_wall_s)
     else:
-        state = CurriculumState.from_json(checkpoint.state.read_text())
-        can_continue = state.status in ("running", "interrupted", "time_limit", "budget_reached")
+        state = checkpoint.read_state()
+        can_continue = state.status in (RunStatus.RUNNING, RunStatus.INTERRUPTED, RunStatus.TIME_LIMIT,
+                                        RunStatus.BUDGET_REACHED)
         time_left = None if max_wall_s is None else max_wall_s - state.wall_s
         if can_continue and state.num_timesteps < budget and (time_left is None or time_left > 0):
             print(f"continuing {run_dir} from {state.num_timesteps} env steps", flush=True)
             trainer = CurriculumTrainer.resume(run_dir, progress=False, total_steps=budget)
             state = trainer.run(max_wall_s=time_left)
-    rule = load_run_config(run_dir / "config.yaml").curriculum.stages[0].advance
-    with (run_dir / "episodes.csv").open(newline="") as file:
-        rows = list(csv.DictReader(file))
-    steps = np.array([int(r["step"]) for r in rows])
-    wall = np.array([float(r["wall_s"]) for r in rows])
-    scores = np.array([float(r["score"]) for r in rows])
-    from curricula.evaluation import trailing_mean
+    rule = load_run_config(run.config_file).curriculum.stages[0].advance
+    rows = run.read_episodes()
+    steps = np.array([r.step for r in rows])
+    wall = np.array([r.wall_s for r in rows])
+    scores = np.array([r.score for r in rows])
+    from myo_sds.evaluation import trailing_mean
 
     curve = trailing_mean(scores, WINDOW) if len(rows) else np.array([])
-    passed = [h for h in state.history if h["decision"] == "passed"]
+    passed = [t for t in state.history if t.decision == "passed"]
     return {"config": str(config), "setup": setup, "overrides": list(overrides), "seed": seed,
             "metric": rule.metric, "threshold": rule.threshold, "window": rule.window,
-            "status": state.status, "env_steps": state.num_timesteps, "wall_s": state.wall_s,
+            "status": state.status.value, "env_steps": state.num_timesteps, "wall_s": state.wall_s,
             "steps_per_s": state.num_timesteps / max(state.wall_s, 1e-9),
-            "reached_at_steps": passed[0]["at_step"] if passed else None,
-            "reached_at_wall_s": float(wall[steps <= passed[0]["at_step"]][-1]) if passed and len(rows) else None,
+            "reached_at_steps": passed[0].at_step if passed else None,
+            "reached_at_wall_s": float(wall[steps <= passed[0].at_step][-1]) if passed and len(rows) else None,
             "curve": {"steps": steps.tolist(), "wall_s": wall.tolist(), "score": curve.tolist()}}
 
 

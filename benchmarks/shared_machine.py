@@ -42,12 +42,12 @@ def _train(config: Path, steps: int, overrides: list[str], env: dict[str, str], 
 
 
 def _throughput(process: subprocess.Popen, run_dir: Path) -> float:
-    from curricula.training import STATE_FILE, CurriculumState
+    from myo_sds.run_folder import RunFolder
 
     _, stderr = process.communicate()
     if process.returncode != 0:
         raise RuntimeError(f"training in {run_dir} failed ({process.returncode}):\n{stderr[-2000:]}")
-    state = CurriculumState.from_json((run_dir / STATE_FILE).read_text())
+    state = RunFolder(run_dir).read_state()
     return state.num_timesteps / state.wall_s
 
 
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
     env = dict(item.split("=", 1) for item in args.env)
-    from curricula.threads import available_cpus
+    from myo_sds.threads import available_cpus
 
     print(f"{available_cpus()} CPUs; config {args.config.name}, {args.steps} env steps per training"
           + "".join(f", --set {o}" for o in args.overrides) + "".join(f", {e}" for e in args.env), flush=True)

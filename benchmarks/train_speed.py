@@ -32,7 +32,7 @@ sys.path.insert(0, str(REPO))
 def _timed_learn(model, venv_inner, steps: int) -> dict[str, float]:
     """Run the reference's plain ``learn`` for ``steps`` env steps (after one warm-up rollout)
     and split its time; the model is not saved, so its ``train`` can be wrapped."""
-    from curricula.training import WallClock
+    from myo_sds.training.rollout import WallClock
 
     rollout = model.n_steps * model.n_envs
     model.learn(rollout, reset_num_timesteps=False)  # warm-up: process start, first allocations
@@ -61,7 +61,7 @@ def run_reference(steps: int, n_envs: int) -> dict[str, float]:
     from sb3_contrib import RecurrentPPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
-    from curricula.schema import PolicyConfig, PpoConfig
+    from myo_sds.curricula.schema import PolicyConfig, PpoConfig
 
     policy, ppo = PolicyConfig(), PpoConfig()
     inner = SubprocVecEnv([_official_env for _ in range(n_envs)])
@@ -81,8 +81,8 @@ def run_reference(steps: int, n_envs: int) -> dict[str, float]:
 
 def run_ours(steps: int, config: Path, overrides: tuple[str, ...] = ()) -> dict[str, float]:
     """``train.py``'s own loop on ``config``; the first rollout (warm-up) is not counted."""
-    from curricula.schema import load_run_config
-    from curricula.training import CurriculumTrainer
+    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.training import CurriculumTrainer
 
     base = load_run_config(config, overrides)
     rollout = base.n_envs * base.ppo.n_steps
@@ -103,7 +103,7 @@ def run_ours(steps: int, config: Path, overrides: tuple[str, ...] = ()) -> dict[
 def _bare_worker(seconds: float) -> float:
     import mujoco
 
-    from envs.baoding import FRAME_SKIP, BaodingEnv
+    from myo_sds.envs.baoding import FRAME_SKIP, BaodingEnv
 
     env = BaodingEnv()
     model, data = env.model, mujoco.MjData(env.model)

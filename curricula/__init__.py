@@ -1,11 +1,8 @@
-"""Curriculum files, the stage advancement rule and the curriculum training loop."""
+"""Curriculum files and run configs, the stage advancement rule, the PPO schedule, and the
+bundled curricula (``*.yaml`` beside this file). Imports no simulator and no torch."""
 
-from curricula.threads import limit_openmp_spinning
-
-limit_openmp_spinning()  # before anything imports torch
-
-from curricula.advancement import Decision, StageProgress, decide  # noqa: E402
-from curricula.schema import ConfigError, Curriculum, RunConfig, load_curriculum, load_run_config  # noqa: E402
+from myo_sds.curricula.advancement import Decision, StageProgress, decide
+from myo_sds.curricula.schema import ConfigError, Curriculum, RunConfig, load_curriculum, load_run_config
 
 __all__ = ["ConfigError", "Curriculum", "Decision", "RunConfig", "StageProgress", "decide",
            "load_curriculum", "load_run_config"]

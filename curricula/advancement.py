@@ -12,8 +12,8 @@ from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from curricula.schema import AdvanceRule
-from envs.metrics import EpisodeResult
+from myo_sds.curricula.schema import AdvanceRule
+from myo_sds.envs.metrics import EpisodeResult
 
 
 class Decision(enum.Enum):

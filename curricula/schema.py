@@ -15,7 +15,7 @@ from typing import Any
 
 import yaml
 
-from envs.task_specs import TASK_SPECS
+from myo_sds.envs.task_specs import TASK_SPECS
 
 
 class ConfigError(ValueError):
@@ -80,12 +80,20 @@ class PpoOverrides:
         return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
 
 
+DEFAULT_PRESET = "p1"
+
+
 @dataclass(frozen=True)
 class Stage:
     name: str
-    env: Mapping[str, Any]  # complete knobs for the task (defaults merged in), validated
+    env: Mapping[str, Any]  # the knobs the curriculum sets (defaults merged in), validated
     advance: AdvanceRule | None  # None: train on this stage until the step budget ends
     ppo: PpoOverrides = PpoOverrides()
+
+    @property
+    def knobs(self) -> dict[str, Any]:
+        """The complete knobs the stage sends to every env: the preset is always explicit."""
+        return {"preset": DEFAULT_PRESET, **self.env}
 
 
 @dataclass(frozen=True)
@@ -114,11 +122,11 @@ class PolicyConfig:
     # One LSTM call per sequence in updates (same function, faster); false: sb3-contrib's
     # step-by-step loop, kept to reproduce the reference setup's speed.
     fast_lstm_update: bool = True
-    # Soft bound on the Gaussian's mean, bound * tanh(mean / bound) (curricula/policy.py);
+    # Soft bound on the Gaussian's mean, bound * tanh(mean / bound) (myo_sds/policy.py);
     # 0: unbounded, as in sb3-contrib. Needs fast_lstm_update.
     action_mean_bound: float = 0.0
     # The actor's output layer learns this many times as fast as the rest (> 0; through a
-    # reparametrization, curricula/policy.py). Needs fast_lstm_update.
+    # reparametrization, myo_sds/policy.py). Needs fast_lstm_update.
     action_head_lr_scale: float = 1.0
 
 

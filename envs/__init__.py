@@ -13,8 +13,8 @@ from gymnasium.envs.registration import register, registry  # noqa: E402
 
 __all__ = ["BaodingEnv", "BaodingTask", "DieEnv", "DieTask", "TASKS"]
 
-_LAZY = {"BaodingEnv": "envs.baoding", "BaodingTask": "envs.baoding_task", "DieEnv": "envs.die",
-         "DieTask": "envs.die_task"}
+_LAZY = {"BaodingEnv": "myo_sds.envs.baoding", "BaodingTask": "myo_sds.envs.baoding_task", "DieEnv": "myo_sds.envs.die",
+         "DieTask": "myo_sds.envs.die_task"}
 
 
 def __getattr__(name: str):
@@ -23,19 +23,19 @@ def __getattr__(name: str):
 
         return getattr(importlib.import_module(_LAZY[name]), name)
     if name == "TASKS":  # task name (as written in curricula) -> env class
-        from envs.task_specs import TASK_SPECS
+        from myo_sds.envs.task_specs import TASK_SPECS
 
         return {task: spec.env_class() for task, spec in TASK_SPECS.items()}
     raise AttributeError(f"module 'envs' has no attribute {name!r}")
 
 
 _IDS = {
-    "myosds/BaodingP1-v0": ("envs.baoding:BaodingEnv", {"preset": "p1"}),
-    "myosds/BaodingP2-v0": ("envs.baoding:BaodingEnv", {"preset": "p2"}),
-    "myosds/Baoding-v0": ("envs.baoding:BaodingEnv", {}),
-    "myosds/DieP1-v0": ("envs.die:DieEnv", {"preset": "p1"}),
-    "myosds/DieP2-v0": ("envs.die:DieEnv", {"preset": "p2"}),
-    "myosds/Die-v0": ("envs.die:DieEnv", {}),
+    "myosds/BaodingP1-v0": ("myo_sds.envs.baoding:BaodingEnv", {"preset": "p1"}),
+    "myosds/BaodingP2-v0": ("myo_sds.envs.baoding:BaodingEnv", {"preset": "p2"}),
+    "myosds/Baoding-v0": ("myo_sds.envs.baoding:BaodingEnv", {}),
+    "myosds/DieP1-v0": ("myo_sds.envs.die:DieEnv", {"preset": "p1"}),
+    "myosds/DieP2-v0": ("myo_sds.envs.die:DieEnv", {"preset": "p2"}),
+    "myosds/Die-v0": ("myo_sds.envs.die:DieEnv", {}),
 }
 for _id, (_entry, _kwargs) in _IDS.items():
     if _id not in registry:

@@ -25,8 +25,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from envs.hand_env import MuscleHandEnv, vector_norm
-from envs.baoding_task import (  # noqa: F401  (re-exported: the env's public names)
+from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
+from myo_sds.envs.baoding_task import (  # noqa: F401  (re-exported: the env's public names)
     MODEL_FILE,
     HORIZON,
     FRAME_SKIP,

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from envs.knobs import (
+from myo_sds.envs.knobs import (
     Range,
     check_complete,
     merge_preset,

@@ -19,9 +19,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from envs.hand_env import MuscleHandEnv, vector_norm
-from envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
-from envs.die_task import (  # noqa: F401  (re-exported: the env's public names)
+from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
+from myo_sds.envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
+from myo_sds.envs.die_task import (  # noqa: F401  (re-exported: the env's public names)
     MODEL_FILE,
     HORIZON,
     FRAME_SKIP,

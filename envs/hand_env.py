@@ -15,9 +15,9 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from envs.assets import load_hand_model
-from envs.knobs import check_known
-from envs.metrics import EpisodeResult
+from myo_sds.envs.assets import load_hand_model
+from myo_sds.envs.knobs import check_known
+from myo_sds.envs.metrics import EpisodeResult
 
 _INSTABILITY_WARNINGS = np.array([mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
                                   mujoco.mjtWarning.mjWARN_BADQACC], dtype=int)

@@ -11,7 +11,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from envs import baoding_task, die_task
+from myo_sds.envs import baoding_task, die_task
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,6 @@ class TaskSpec:
 
 TASK_SPECS: dict[str, TaskSpec] = {
     "baoding": TaskSpec(baoding_task.KNOB_HELP, baoding_task.parse_knobs, baoding_task.REWARD_TERMS,
-                        "envs.baoding:BaodingEnv"),
-    "die": TaskSpec(die_task.KNOB_HELP, die_task.parse_knobs, die_task.REWARD_TERMS, "envs.die:DieEnv"),
+                        "myo_sds.envs.baoding:BaodingEnv"),
+    "die": TaskSpec(die_task.KNOB_HELP, die_task.parse_knobs, die_task.REWARD_TERMS, "myo_sds.envs.die:DieEnv"),
 }

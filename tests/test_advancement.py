@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from curricula.advancement import Decision, StageProgress, decide, episode_metric
-from curricula.schema import AdvanceRule
-from envs.metrics import EpisodeResult
+from myo_sds.curricula.advancement import Decision, StageProgress, decide, episode_metric
+from myo_sds.curricula.schema import AdvanceRule
+from myo_sds.envs.metrics import EpisodeResult
 
 
 def progress(values, steps=10_000, window=4):

@@ -8,8 +8,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import envs  # noqa: F401  (registers the ids)
-from envs.baoding import (
+import myo_sds.envs  # noqa: F401  (registers the ids)
+from myo_sds.envs.baoding import (
     OFFICIAL_START_ANGLE,
     ORBIT_CENTER,
     BaodingEnv,
@@ -291,7 +291,7 @@ def test_ball_physics_edits_match_a_recompiled_model():
     """Edited ball radius and mass give the inertia and bounds MuJoCo's compiler would."""
     import mujoco
 
-    from envs.assets import load_hand_model
+    from myo_sds.envs.assets import load_hand_model
 
     env = BaodingEnv()
     task = BaodingTask("ccw", 5.0, 0.025, 0.028, 0.7, (0.019, 0.024), (0.25, 0.035),

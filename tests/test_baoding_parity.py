@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from envs.baoding import DIRECTIONS, BaodingEnv, BaodingTask
+from myo_sds.envs.baoding import DIRECTIONS, BaodingEnv, BaodingTask
 
 gym = pytest.importorskip("gymnasium")
 pytest.importorskip("myosuite")

@@ -9,10 +9,10 @@ import mujoco
 import numpy as np
 import pytest
 
-import envs  # noqa: F401  (registers the ids)
-from envs.die import DieEnv, DieTask, parse_knobs
-from envs.metrics import EpisodeResult
-from envs.physics import euler_to_quat, mat_to_euler
+import myo_sds.envs  # noqa: F401  (registers the ids)
+from myo_sds.envs.die import DieEnv, DieTask, parse_knobs
+from myo_sds.envs.metrics import EpisodeResult
+from myo_sds.envs.physics import euler_to_quat, mat_to_euler
 
 OFFICIAL = {"p1": "myoChallengeDieReorientP1-v0", "p2": "myoChallengeDieReorientP2-v0"}
 

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from curricula import evaluation as ev
-from curricula.training import CurriculumTrainer
+from myo_sds import evaluation as ev
+from myo_sds.training import CurriculumTrainer
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -129,7 +129,7 @@ def test_cli_writes_json_plots_and_video(run_dir, tmp_path):
 
 
 def test_video_episodes_are_the_best_and_the_worst():
-    from envs.metrics import EpisodeResult
+    from myo_sds.envs.metrics import EpisodeResult
 
     scores = [0.2, 0.9, 0.0, 0.5, 0.0]
     report = ev.EvaluationReport(None, None, seed=100, episodes=[

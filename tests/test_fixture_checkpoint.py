@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from curricula import evaluation as ev
-from curricula.training import CurriculumTrainer
+from myo_sds import evaluation as ev
+from myo_sds.training import CurriculumTrainer
 
 FIXTURE = Path(__file__).resolve().parent / "fixtures" / "run_before_restructure"
 
@@ -36,4 +36,4 @@ def test_old_checkpoint_evaluates_to_the_same_episodes(old_run):
 def test_old_run_resumes_in_its_stage(old_run):
     state = CurriculumTrainer.resume(old_run, progress=False, total_steps=384).run()
     assert state.status == "budget_reached" and state.num_timesteps == 384
-    assert state.stage_index == 1 and state.history[0]["at_step"] == 256
+    assert state.stage_index == 1 and state.history[0].at_step == 256

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from curricula.training import latest_checkpoint
+from myo_sds.run_folder import RunFolder
 from tiny_run import CURRICULUM, write_config
 
 SPEC = importlib.util.spec_from_file_location(
@@ -79,9 +79,9 @@ def test_run_folders_are_kept_and_a_second_call_continues_them(tmp_path):
     first = learning_check.train(config, 5, 256, runs)
     assert (first["status"], first["env_steps"], first["threshold"]) == ("budget_reached", 256, 0.99)
     assert first["reached_at_steps"] is None and len(first["curve"]["steps"]) > 0
-    checkpoint = latest_checkpoint(runs / "run_s5")
+    checkpoint = RunFolder(runs / "run_s5").latest_checkpoint()
     again = learning_check.train(config, 5, 256, runs)  # already done: only read
-    assert latest_checkpoint(runs / "run_s5") == checkpoint and again["curve"] == first["curve"]
+    assert RunFolder(runs / "run_s5").latest_checkpoint() == checkpoint and again["curve"] == first["curve"]
     longer = learning_check.train(config, 5, 512, runs)
     assert longer["env_steps"] == 512 and longer["wall_s"] > first["wall_s"]
     count = len(first["curve"]["steps"])

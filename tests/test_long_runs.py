@@ -3,15 +3,16 @@ the last checkpoint, Ctrl-C stops between minibatches, and config errors come be
 
 from __future__ import annotations
 
-import csv
 import shutil
 import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
-from curricula.training import CurriculumState, CurriculumTrainer, latest_checkpoint
+from myo_sds.run_folder import EpisodeRecord, RunFolder
+from myo_sds.training import CurriculumTrainer
 from tiny_run import CONFIG, CURRICULUM, write_config
 
 REPO = Path(__file__).resolve().parents[1]
@@ -19,37 +20,36 @@ REPO = Path(__file__).resolve().parents[1]
 ONE_STAGE = CURRICULUM.replace("threshold: 0.01", "threshold: 0.99")
 
 
-def episode_rows(run: Path) -> list[dict[str, str]]:
-    with (run / "episodes.csv").open(newline="") as file:
-        return list(csv.DictReader(file))
+def episode_rows(run: Path) -> list[EpisodeRecord]:
+    return RunFolder(run).read_episodes()
 
 
-def without_wall_time(rows: list[dict[str, str]]) -> list[tuple]:
-    return [tuple(v for k, v in row.items() if k != "wall_s") for row in rows]
+def without_wall_time(rows: list[EpisodeRecord]) -> list[EpisodeRecord]:
+    return [replace(row, wall_s=0.0) for row in rows]
 
 
 def test_resume_continues_the_random_streams_and_is_reproducible(tmp_path):
     config = write_config(tmp_path, total=512, curriculum=ONE_STAGE)
     first = tmp_path / "first"
     CurriculumTrainer.start(config, run_dir=first, progress=False).run()
-    start_phases = {row["start_phase"] for row in episode_rows(first) if int(row["step"]) <= 256}
+    start_phases = {row.start_phase for row in episode_rows(first) if row.step <= 256}
     copies = [tmp_path / "a", tmp_path / "b"]
     for copy in copies:
         shutil.copytree(first, copy)
         CurriculumTrainer.resume(copy, progress=False, total_steps=1024).run()
-    resumed = [[row for row in episode_rows(copy) if int(row["step"]) > 512] for copy in copies]
+    resumed = [[row for row in episode_rows(copy) if row.step > 512] for copy in copies]
     assert len(resumed[0]) >= 20
     # Resuming the same checkpoint twice gives the same episodes ...
     assert without_wall_time(resumed[0]) == without_wall_time(resumed[1])
     # ... and they are new ones: none starts where the run's first episodes started.
-    assert not start_phases & {row["start_phase"] for row in resumed[0]}
+    assert not start_phases & {row.start_phase for row in resumed[0]}
 
 
 def test_each_episode_row_has_its_own_wall_time(tmp_path):
     config = write_config(tmp_path, total=1024, curriculum=ONE_STAGE)
     CurriculumTrainer.start(config, run_dir=tmp_path / "run", progress=False).run()
     rows = episode_rows(tmp_path / "run")
-    walls = [float(row["wall_s"]) for row in rows]
+    walls = [row.wall_s for row in rows]
     assert walls == sorted(walls)
     # 8 rollouts of 128 steps: one wall time per rollout would give at most 8 values.
     assert len(set(walls)) > 3 * 8
@@ -73,30 +73,30 @@ def test_resume_after_sigkill_continues_from_the_last_checkpoint_with_consistent
         # Kill it once it has logged episodes past a checkpoint (every 10 rollouts of 128 steps).
         deadline = time.time() + 240
         while time.time() < deadline:
-            checkpoint = latest_checkpoint(run)
+            checkpoint = RunFolder(run).latest_checkpoint()
             rows = episode_rows(run) if checkpoint is not None else []
-            if rows and int(rows[-1]["step"]) > int(checkpoint.model.name.split("_")[2]) + 128:
+            if rows and rows[-1].step > checkpoint.steps + 128:
                 break
             time.sleep(0.05)
         process.send_signal(signal.SIGKILL)
     finally:
         process.wait(timeout=60)
     assert process.returncode == -signal.SIGKILL
-    saved = CurriculumState.from_json(latest_checkpoint(run).state.read_text())
+    saved = RunFolder(run).latest_checkpoint().read_state()
     before = episode_rows(run)
-    assert int(before[-1]["step"]) > saved.num_timesteps  # the kill lost episodes after the checkpoint
+    assert before[-1].step > saved.num_timesteps  # the kill lost episodes after the checkpoint
     # The run folder's state is the checkpoint's: nothing after it was recorded as done.
-    assert CurriculumState.from_json((run / "curriculum_state.json").read_text()) == saved
+    assert RunFolder(run).read_state() == saved
 
     total = saved.num_timesteps + 512
     state = CurriculumTrainer.resume(run, progress=False, total_steps=total).run()
     assert state.status == "budget_reached" and state.num_timesteps == total
     after = episode_rows(run)
-    kept = [row for row in before if int(row["step"]) <= saved.num_timesteps]
+    kept = [row for row in before if row.step <= saved.num_timesteps]
     assert after[: len(kept)] == kept  # nothing lost up to the checkpoint
     new = after[len(kept):]
-    assert new and all(int(row["step"]) > saved.num_timesteps for row in new)  # no orphans from the killed run
-    steps = [int(row["step"]) for row in after]
+    assert new and all(row.step > saved.num_timesteps for row in new)  # no orphans from the killed run
+    steps = [row.step for row in after]
     assert steps == sorted(steps)
     assert state.stage_episodes == len(after)  # the curriculum counted exactly the logged episodes
     # TensorBoard shows one curve: the killed run's points after the checkpoint are purged.
@@ -120,7 +120,7 @@ def test_a_stop_during_an_update_ends_it_before_the_next_minibatch(tmp_path):
     state = trainer.run()
     # 50 epochs of 2 minibatches were due; the stop came after the third.
     assert state.status == "interrupted" and len(steps_taken) == 3
-    assert latest_checkpoint(run).model.name == f"rl_model_{state.num_timesteps}_steps.zip"
+    assert RunFolder(run).latest_checkpoint().steps == state.num_timesteps
     resumed = CurriculumTrainer.resume(run, progress=False, total_steps=state.num_timesteps + 128)
     assert resumed.run().status == "budget_reached"
 

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from envs.metrics import EpisodeResult, official_score, drop_rate, mean_confidence_interval, mean_effort
+from myo_sds.envs.metrics import EpisodeResult, official_score, drop_rate, mean_confidence_interval, mean_effort
 
 
 def test_official_score_counts_steps_lost_to_a_drop_as_unsolved():
@@ -25,7 +25,7 @@ def test_confidence_interval():
 
 
 def test_scores_by_start_phase_sector():
-    from curricula.evaluation import per_start_phase
+    from myo_sds.evaluation import per_start_phase
 
     def episode(degrees, solved, dropped=False):
         return EpisodeResult(solved, 200, 200, dropped, 0.1, "hold", start_phase=math.radians(degrees))

@@ -9,9 +9,9 @@ import torch as th
 from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from curricula.policy import SequenceLstmPolicy
-from curricula.vec_env import ThreadVecEnv
-from envs.baoding import BaodingEnv
+from myo_sds.policy import SequenceLstmPolicy
+from myo_sds.vec_env import ThreadVecEnv
+from myo_sds.envs.baoding import BaodingEnv
 
 
 @pytest.mark.parametrize("starts_inside", [False, True])

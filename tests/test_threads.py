@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from curricula import threads
-from curricula.threads import CpuContention, UpdateThreads, available_cpus
+from myo_sds import threads
+from myo_sds.threads import CpuContention, UpdateThreads, available_cpus
 
 
 class FakeClock:

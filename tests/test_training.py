@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
@@ -13,8 +12,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from curricula.schema import ConfigError
-from curricula.training import CurriculumState, CurriculumTrainer, checkpoint_files, latest_checkpoint
+from myo_sds.curricula.schema import ConfigError
+from myo_sds.run_folder import RunFolder, RunStatus
+from myo_sds.training import CurriculumTrainer
 from tiny_run import CONFIG, CURRICULUM, write_config
 
 REPO = Path(__file__).resolve().parents[1]
@@ -28,9 +28,10 @@ def test_two_stage_run_advances_and_records_everything(tmp_path):
     assert state.status == "budget_reached" and state.num_timesteps >= 2048
     assert state.stage_index == 1
     (transition,) = state.history
-    assert transition["stage"] == "easy" and transition["decision"] == "passed"
-    assert transition["measured"] >= 0.01 and transition["stage_episodes"] >= 8
-    saved = CurriculumState.from_json((run / "curriculum_state.json").read_text())
+    assert transition.stage == "easy" and transition.decision == "passed"
+    assert transition.measured >= 0.01 and transition.stage_episodes >= 8
+    folder = RunFolder(run)
+    saved = folder.read_state()
     assert saved == state
     assert set(saved.steps_per_stage) == {"easy", "hard"}
     # Stage 2's PPO overrides took effect, including a rebuilt rollout buffer.
@@ -39,16 +40,14 @@ def test_two_stage_run_advances_and_records_everything(tmp_path):
     assert model.batch_size == 64 and model.learning_rate == 1e-4
     # Every worker env got the stage-2 knobs, in place.
     assert trainer.venv.get_attr("knobs")[0].direction == "ccw"
-    for name in ("config.yaml", "curriculum.yaml", "command.txt", "versions.json", "episodes.csv",
-                 "final_model.zip", "final_vecnormalize.pkl"):
-        assert (run / name).is_file(), name
-    assert list((run / "tb").glob("events.out.tfevents.*"))
-    rows = (run / "episodes.csv").read_text().splitlines()
-    assert rows[0].startswith("step,wall_s,stage_index,stage,score") and len(rows) > 8
-    assert {line.split(",")[3] for line in rows[1:]} == {"easy", "hard"}
-    checkpoints = sorted((run / "checkpoints").glob("rl_model_*_steps.zip"))
-    assert len(checkpoints) == 2  # keep_checkpoints
-    assert latest_checkpoint(run).model == checkpoint_files(run / "checkpoints", state.num_timesteps).model
+    for path in (folder.config_file, folder.curriculum_file, *folder.provenance_files, folder.episodes_file,
+                 folder.final_model, folder.final_vecnormalize):
+        assert path.is_file(), path
+    assert list(folder.tensorboard_dir.glob("events.out.tfevents.*"))
+    episodes = folder.read_episodes()
+    assert len(episodes) > 8 and {e.stage for e in episodes} == {"easy", "hard"}
+    assert len(folder.checkpoint_steps()) == 2  # keep_checkpoints
+    assert folder.latest_checkpoint() == folder.checkpoint(state.num_timesteps)
 
 
 def test_ppo_warmup_trains_with_its_settings_then_hands_over_across_a_resume(tmp_path):
@@ -74,11 +73,11 @@ def test_crash_mid_write_leaves_previous_checkpoint_loadable(tmp_path):
     config = write_config(tmp_path, total=512)
     run = tmp_path / "run"
     CurriculumTrainer.start(config, run_dir=run, progress=False).run()
-    good = latest_checkpoint(run)
+    good = RunFolder(run).latest_checkpoint()
     # A later checkpoint whose state file never got written (crash between files).
-    partial = checkpoint_files(run / "checkpoints", 99999)
+    partial = RunFolder(run).checkpoint(99999)
     partial.model.write_bytes(b"truncated")
-    assert latest_checkpoint(run) == good
+    assert RunFolder(run).latest_checkpoint() == good
     from sb3_contrib import RecurrentPPO
 
     assert RecurrentPPO.load(good.model).num_timesteps == int(good.model.name.split("_")[2])
@@ -90,7 +89,7 @@ def test_time_limit_pauses_the_run_and_resume_continues_it(tmp_path):
     # Any positive limit stops after the first rollout (2 envs x 64 steps), as a pause.
     state = CurriculumTrainer.start(config, run_dir=run, progress=False).run(max_wall_s=1e-9)
     assert state.status == "time_limit" and state.num_timesteps == 128 and state.wall_s > 0
-    assert latest_checkpoint(run).model.name == "rl_model_128_steps.zip"
+    assert RunFolder(run).latest_checkpoint().model.name == "rl_model_128_steps.zip"
     assert not (run / "final_model.zip").exists()
     resumed = CurriculumTrainer.resume(run, progress=False)
     state = resumed.run(max_wall_s=1e-9)
@@ -103,11 +102,12 @@ def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     state = CurriculumTrainer.start(config, run_dir=run, progress=False).run()
     assert state.status == "budget_reached" and state.num_timesteps == 256
     # Each episode's start phase is logged (random phases here).
-    header, *rows = [line.split(",") for line in (run / "episodes.csv").read_text().splitlines()]
+    episodes_file = RunFolder(run).episodes_file
+    header, *rows = [line.split(",") for line in episodes_file.read_text().splitlines()]
     assert header[-1] == "start_phase" and len({row[-1] for row in rows}) > 1
     assert all(0 <= float(row[-1]) < 6.2832 for row in rows)
     # A run begun by an older version logged no start phases: its rows keep matching its header.
-    (run / "episodes.csv").write_text("".join(",".join(r[:-1]) + "\n" for r in [header, *rows]))
+    episodes_file.write_text("".join(",".join(r[:-1]) + "\n" for r in [header, *rows]))
     with pytest.raises(ConfigError, match="budget_reached.*--total-steps"):
         CurriculumTrainer.resume(run, progress=False)
     with pytest.raises(ConfigError, match="total_steps 256 must exceed the 256 steps"):
@@ -115,9 +115,9 @@ def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     resumed = CurriculumTrainer.resume(run, progress=False, total_steps=512)
     state = resumed.run()
     assert state.status == "budget_reached" and state.num_timesteps == 512
-    assert yaml.safe_load((run / "config.yaml").read_text())["total_steps"] == 512
-    assert latest_checkpoint(run).model.name == "rl_model_512_steps.zip"
-    lines = [line.split(",") for line in (run / "episodes.csv").read_text().splitlines()]
+    assert yaml.safe_load(RunFolder(run).config_file.read_text())["total_steps"] == 512
+    assert RunFolder(run).latest_checkpoint().model.name == "rl_model_512_steps.zip"
+    lines = [line.split(",") for line in episodes_file.read_text().splitlines()]
     assert lines[0] == header[:-1] and {len(line) for line in lines} == {len(header) - 1}
     steps = [int(line[0]) for line in lines[1:]]
     assert steps == sorted(steps) and steps[-1] > 256
@@ -137,11 +137,11 @@ def test_learning_rate_decay_follows_env_steps_across_stages_and_resume(tmp_path
     optimizer_rate = trainer.model.policy.optimizer.param_groups[0]["lr"]
     assert optimizer_rate == pytest.approx(1e-3 * 0.01 ** (128 / 1024))
     # Stage 1 passed after that update: stage 2's decay starts from its top.
-    assert state.history[0]["at_step"] == 256 and trainer.model.learning_rate == pytest.approx(2e-4)
+    assert state.history[0].at_step == 256 and trainer.model.learning_rate == pytest.approx(2e-4)
     # Continued past stage 1's pass, the stage's own decay runs from the stage's first step.
     resumed = CurriculumTrainer.resume(run, progress=False, total_steps=2048)
     state = resumed.run()
-    passed_at = state.history[0]["at_step"]
+    passed_at = state.history[0].at_step
     last_rollout_start = state.num_timesteps - 64  # stage 2's rollouts: 2 envs x 32 steps
     expected = 2e-4 * 0.01 ** min((last_rollout_start - passed_at) / 256, 1.0)
     assert state.stage_index == 1 and resumed.model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(expected)
@@ -158,35 +158,36 @@ def test_sigint_saves_and_resume_continues_same_stage_and_counters(tmp_path):
     run = tmp_path / "run"
     process = run_train(["--config", str(config), "--run-dir", str(run), "--no-progress"], tmp_path)
     deadline = time.time() + 240
-    while time.time() < deadline and latest_checkpoint(run) is None:
+    while time.time() < deadline and RunFolder(run).latest_checkpoint() is None:
         time.sleep(0.5)
-    assert latest_checkpoint(run) is not None, process.communicate()[0]
+    assert RunFolder(run).latest_checkpoint() is not None, process.communicate()[0]
     time.sleep(1.0)
     process.send_signal(signal.SIGINT)
     output, _ = process.communicate(timeout=120)
     assert process.returncode == 130, output
     assert "SIGINT: saving a checkpoint" in output
-    state = json.loads((run / "curriculum_state.json").read_text())
-    assert state["status"] == "interrupted"
-    saved_steps, saved_stage = state["num_timesteps"], state["stage_index"]
-    assert latest_checkpoint(run).model.name == f"rl_model_{saved_steps}_steps.zip"
-    assert not (run / "final_model.zip").exists()
+    folder = RunFolder(run)
+    state = folder.read_state()
+    assert state.status is RunStatus.INTERRUPTED
+    saved_steps, saved_stage = state.num_timesteps, state.stage_index
+    assert folder.latest_checkpoint().steps == saved_steps
+    assert not folder.final_model.exists()
 
     # Resume with a budget a little beyond the saved step count.
-    config_text = (run / "config.yaml").read_text().replace("total_steps: 100000", f"total_steps: {saved_steps + 512}")
-    (run / "config.yaml").write_text(config_text)
+    config_text = folder.config_file.read_text().replace("total_steps: 100000", f"total_steps: {saved_steps + 512}")
+    folder.config_file.write_text(config_text)
     resumed = run_train(["--resume", str(run), "--no-progress"], tmp_path)
     output, _ = resumed.communicate(timeout=300)
     assert resumed.returncode == 0, output
-    state = json.loads((run / "curriculum_state.json").read_text())
-    assert state["status"] in ("budget_reached", "completed")
-    assert saved_steps + 512 <= state["num_timesteps"] <= saved_steps + 512 + 128
-    assert state["stage_index"] >= saved_stage
+    state = folder.read_state()
+    assert state.status in (RunStatus.BUDGET_REACHED, RunStatus.COMPLETED)
+    assert saved_steps + 512 <= state.num_timesteps <= saved_steps + 512 + 128
+    assert state.stage_index >= saved_stage
     from sb3_contrib import RecurrentPPO
 
-    model = RecurrentPPO.load(run / "final_model.zip")
-    assert model.num_timesteps == state["num_timesteps"]
-    assert len(list((run / "tb").glob("events.out.tfevents.*"))) == 2  # same folder, one curve
+    model = RecurrentPPO.load(folder.final_model)
+    assert model.num_timesteps == state.num_timesteps
+    assert len(list(folder.tensorboard_dir.glob("events.out.tfevents.*"))) == 2  # same folder, one curve
 
 
 def test_bad_config_fails_before_training(tmp_path):
@@ -220,6 +221,6 @@ def test_die_curriculum_advances_a_stage(tmp_path):
     (tmp_path / "run.yaml").write_text(CONFIG.format(total=1024))
     trainer = CurriculumTrainer.start(tmp_path / "run.yaml", run_dir=tmp_path / "run", progress=False)
     state = trainer.run()
-    assert state.history and state.history[0]["stage"] == "hold-still"
-    assert state.history[0]["decision"] == "passed" and state.stage_index == 1
+    assert state.history and state.history[0].stage == "hold-still"
+    assert state.history[0].decision == "passed" and state.stage_index == 1
     assert trainer.venv.get_attr("knobs")[0].goal_rotation[0].high == 0.5

@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from curricula.threads import available_cpus
+from myo_sds.threads import available_cpus
 
 
 class ThreadVecEnv(DummyVecEnv):

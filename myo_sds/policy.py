@@ -22,6 +22,11 @@ output layer of the actor learns ``scale`` times as fast as the rest.
 
 from __future__ import annotations
 
+import json
+import zipfile
+from pathlib import Path
+from typing import Any
+
 import torch as th
 from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
 
@@ -63,3 +68,24 @@ class SequenceLstmPolicy(RecurrentActorCriticPolicy):
         keep = (1.0 - starts[0]).view(1, n_seq, 1)
         output, lstm_states = lstm(features_sequence, (keep * lstm_states[0], keep * lstm_states[1]))
         return th.flatten(output.transpose(0, 1), start_dim=0, end_dim=1), lstm_states
+
+
+# Module paths the policy class was saved under: checkpoints pickle it by reference.
+POLICY_MODULES = ("myo_sds.policy", "curricula.policy")
+
+
+def load_model(path: str | Path, **kwargs: Any):
+    """``RecurrentPPO.load`` that also reads checkpoints saved before the policy class moved:
+    where the archive names :class:`SequenceLstmPolicy` under an older module path, the class
+    is handed to SB3 instead of unpickled."""
+    from sb3_contrib import RecurrentPPO
+
+    custom_objects = dict(kwargs.pop("custom_objects", None) or {})
+    try:
+        with zipfile.ZipFile(path) as archive:
+            saved = json.loads(archive.read("data")).get("policy_class", {})
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        saved = {}  # RecurrentPPO.load reports an unreadable archive itself
+    if isinstance(saved, dict) and saved.get("__module__") in POLICY_MODULES:
+        custom_objects.setdefault("policy_class", SequenceLstmPolicy)
+    return RecurrentPPO.load(path, custom_objects=custom_objects, **kwargs)

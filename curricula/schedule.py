@@ -1,0 +1,49 @@
+"""The PPO settings in force at a stage and env step.
+
+The run config's ``ppo`` sets them; each stage's ``ppo`` overrides some from its start until a
+later stage changes them again; the run's warm-up overrides rollout length, minibatch size and
+epochs for its first env steps; a learning rate may decay log-linearly from where it was set.
+A pure function of the config and the step, so the trainer, a resumed run and the tests all see
+the same schedule.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from myo_sds.curricula.schema import LearningRateDecay, RunConfig
+
+
+@dataclass(frozen=True)
+class PpoSettings:
+    """What the trainer applies to the model before each rollout."""
+
+    learning_rate: float
+    n_steps: int
+    batch_size: int
+    n_epochs: int
+    clip_range: float
+    ent_coef: float
+
+
+def ppo_settings_at(config: RunConfig, stage_index: int, stage_starts: Sequence[int], step: int) -> PpoSettings:
+    """The settings at env step ``step`` of the run, in stage ``stage_index``.
+
+    Args:
+        stage_starts: the env step at which each stage up to ``stage_index`` began.
+    """
+    base = config.ppo
+    values = {"n_steps": base.n_steps, "batch_size": base.batch_size, "n_epochs": base.n_epochs,
+              "clip_range": base.clip_range, "ent_coef": base.ent_coef}
+    rate, rate_set_at = base.learning_rate, 0
+    for index, stage in enumerate(config.curriculum.stages[: stage_index + 1]):
+        overrides = stage.ppo.as_dict()
+        values.update({k: v for k, v in overrides.items() if k in values})
+        if stage.ppo.learning_rate is not None:
+            rate, rate_set_at = stage.ppo.learning_rate, stage_starts[index]
+    warmup = base.warmup
+    if warmup.active(step):
+        values.update({k: v for k in ("n_steps", "batch_size", "n_epochs") if (v := getattr(warmup, k)) is not None})
+    learning_rate = rate.at(step - rate_set_at) if isinstance(rate, LearningRateDecay) else rate
+    return PpoSettings(learning_rate=learning_rate, **values)

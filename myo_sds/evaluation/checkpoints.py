@@ -1,0 +1,169 @@
+"""Which policy a command-line target names, and loading it with its frozen statistics."""
+
+from __future__ import annotations
+
+import pickle
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from myo_sds.curricula.schema import load_curriculum
+from myo_sds.envs.task_specs import TASK_SPECS
+from myo_sds.run_folder import RunFolder, statistics_beside
+
+OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p2"): "myoChallengeBaodingP2-v1",
+                ("die", "p1"): "myoChallengeDieReorientP1-v0", ("die", "p2"): "myoChallengeDieReorientP2-v0"}
+_OFFICIAL_DIRECTIONS = ("hold", "cw", "ccw")  # myosuite's Task enum values 0, 1, 2
+
+
+class EvaluationError(ValueError):
+    """A checkpoint or env that cannot be evaluated; the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class CheckpointRef:
+    """A saved policy and the normalization statistics of the same step."""
+
+    model: Path
+    vecnormalize: Path
+    run_dir: Path | None
+
+    @property
+    def label(self) -> str:
+        return str(self.run_dir.name + "/" + self.model.name if self.run_dir else self.model)
+
+
+@dataclass(frozen=True)
+class EnvChoice:
+    """Which env to evaluate on: a preset or a curriculum stage, ours or the official one."""
+
+    task: str
+    name: str  # "p1", "p2" or "stage:NAME"
+    knobs: dict[str, Any]
+    official: bool = False
+
+    @property
+    def label(self) -> str:
+        return f"{'official' if self.official else 'ours'}:{self.name}"
+
+
+
+def resolve_checkpoint(target: str | Path, checkpoint_steps: int | None = None,
+                       last_checkpoint: bool = False) -> CheckpointRef:
+    """The policy a command-line target names.
+
+    A run folder means its final model (or, with ``last_checkpoint``, its newest checkpoint;
+    with ``checkpoint_steps``, that checkpoint); a ``.zip`` means that file, with the
+    statistics saved beside it under SB3's naming.
+    """
+    path = Path(target)
+    if not path.exists():
+        raise EvaluationError(f"{path}: no such run folder or checkpoint")
+    if path.is_dir():
+        run = RunFolder.containing(path)
+        if run is None:
+            raise EvaluationError(f"{path}: not a run folder (no config.yaml and checkpoints/ inside)")
+        if checkpoint_steps is not None:
+            files = run.checkpoint(checkpoint_steps)
+            if not files.model.is_file():
+                raise EvaluationError(f"{files.model}: no checkpoint at {checkpoint_steps} steps")
+            return CheckpointRef(files.model, files.vecnormalize, run.path)
+        if run.final_model.is_file() and not last_checkpoint:
+            return CheckpointRef(run.final_model, run.final_vecnormalize, run.path)
+        files = run.latest_checkpoint()
+        if files is None:
+            raise EvaluationError(f"{run.path}: no final model and no complete checkpoint yet")
+        return CheckpointRef(files.model, files.vecnormalize, run.path)
+    if path.suffix != ".zip":
+        raise EvaluationError(f"{path}: expected a run folder or a model .zip")
+    run = RunFolder.containing(path.parent)
+    return CheckpointRef(path, statistics_beside(path), run.path if run else None)
+
+
+@dataclass
+class LoadedPolicy:
+    model: Any
+    normalizer: Any  # VecNormalize with frozen statistics, or None
+
+    def act(self, obs: np.ndarray, state, episode_start: bool):
+        batch = obs[None]
+        if self.normalizer is not None:
+            batch = self.normalizer.normalize_obs(batch)
+        action, state = self.model.predict(batch, state=state, episode_start=np.array([episode_start]),
+                                           deterministic=True)
+        return action[0], state
+
+
+def load_policy(ref: CheckpointRef, task: str) -> LoadedPolicy:
+    """Load a model and its statistics (frozen), checking they fit the task's observation."""
+    from myo_sds.policy import load_model
+
+    if not ref.model.is_file():
+        raise EvaluationError(f"{ref.model}: checkpoint not found")
+    try:
+        model = load_model(ref.model, device="cpu")
+    except Exception as error:  # zipfile, pickle and torch errors alike
+        raise EvaluationError(f"{ref.model}: cannot load this checkpoint ({type(error).__name__}: {error}); "
+                              "it is not a complete RecurrentPPO model archive") from None
+    expected = TASK_SPECS[task].env_class().OBS_SIZE
+    shape = model.observation_space.shape
+    if shape != (expected,):
+        raise EvaluationError(f"{ref.model}: the policy takes observations of shape {shape}, but the "
+                              f"{task} env gives ({expected},): it was trained on another task")
+    normalizer = None
+    if ref.vecnormalize.is_file():
+        try:
+            with ref.vecnormalize.open("rb") as file:
+                normalizer = pickle.load(file)
+        except Exception as error:
+            raise EvaluationError(f"{ref.vecnormalize}: cannot read normalization statistics ({error})") from None
+        normalizer.training = False  # evaluation never updates the statistics
+        normalizer.norm_reward = False
+    else:
+        raise EvaluationError(f"{ref.vecnormalize}: normalization statistics of this checkpoint not found "
+                              "(they are saved beside the model under SB3's names)")
+    return LoadedPolicy(model, normalizer)
+
+
+def run_task(ref: CheckpointRef) -> str:
+    """The task a checkpoint was trained on: from its run folder, else from its observation size."""
+    if ref.run_dir is not None:
+        return load_curriculum(RunFolder(ref.run_dir).curriculum_file).task
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    try:
+        data, _, _ = load_from_zip_file(ref.model, load_data=True, device="cpu")
+        shape = data["observation_space"].shape
+    except Exception:  # load_policy reports an unreadable checkpoint with a clear message
+        return "baoding"
+    for name, spec in TASK_SPECS.items():
+        if shape == (spec.env_class().OBS_SIZE,):
+            return name
+    return "baoding"
+
+
+def choose_env(ref: CheckpointRef, name: str, official: bool = False) -> EnvChoice:
+    """Parse ``p1``, ``p2`` or ``stage:NAME`` (a stage of the checkpoint's own curriculum)."""
+    task = run_task(ref)
+    if name in ("p1", "p2"):
+        choice = EnvChoice(task, name, {"preset": name}, official)
+    elif name.startswith("stage:"):
+        if official:
+            raise EvaluationError(f"--env {name}: the official env has only the p1 and p2 tasks")
+        if ref.run_dir is None:
+            raise EvaluationError(f"--env {name}: {ref.model} is not inside a run folder, so it has no curriculum")
+        curriculum = load_curriculum(RunFolder(ref.run_dir).curriculum_file)
+        try:
+            stage = curriculum.stages[curriculum.stage_index(name[len("stage:"):])]
+        except KeyError as error:
+            raise EvaluationError(f"--env {name}: {error.args[0]}") from None
+        choice = EnvChoice(task, name, stage.knobs, official)
+    else:
+        raise EvaluationError(f"--env {name!r}: expected p1, p2 or stage:NAME")
+    if official and (task, name) not in OFFICIAL_IDS:
+        raise EvaluationError(f"no official env for {task} {name}")
+    return choice
+
+

@@ -1,0 +1,161 @@
+"""Deterministic episodes of a checkpoint on our env or the official one, and their report.
+
+Episode ``i`` of an evaluation is reset with seed ``seed + i``. Our presets draw task
+instances exactly as the official env does, so the same seeds give the same episodes on
+both; with a deterministic policy the two scores then agree (tests/test_evaluation.py).
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from myo_sds.envs.task_specs import TASK_SPECS
+from myo_sds.envs.metrics import EpisodeResult, drop_rate, mean_confidence_interval, mean_effort, official_score
+from myo_sds.evaluation.checkpoints import (
+    _OFFICIAL_DIRECTIONS,
+    OFFICIAL_IDS,
+    CheckpointRef,
+    EnvChoice,
+    EvaluationError,
+    LoadedPolicy,
+    load_policy,
+)
+
+@dataclass
+class EvaluationReport:
+    checkpoint: CheckpointRef
+    env: EnvChoice
+    seed: int
+    episodes: list[EpisodeResult] = field(default_factory=list)
+
+    def summary(self) -> dict[str, Any]:
+        scores = [e.score for e in self.episodes]
+        mean, low, high = mean_confidence_interval(scores)
+        per_direction = {}
+        for direction in sorted({e.direction for e in self.episodes if e.direction}):
+            values = [e.score for e in self.episodes if e.direction == direction]
+            d_mean, d_low, d_high = mean_confidence_interval(values)
+            per_direction[direction] = {"episodes": len(values), "score": d_mean, "ci95": [d_low, d_high]}
+        return {
+            "checkpoint": str(self.checkpoint.model),
+            "run_dir": str(self.checkpoint.run_dir) if self.checkpoint.run_dir else None,
+            "env": self.env.name,
+            "official_env": self.env.official,
+            "seed": self.seed,
+            "episodes": len(self.episodes),
+            "score": official_score(self.episodes),
+            "score_ci95": [low, high],
+            "effort": mean_effort(self.episodes),
+            "drop_rate": drop_rate(self.episodes),
+            "mean_length": float(np.mean([e.length for e in self.episodes])) if self.episodes else math.nan,
+            "per_direction": per_direction,
+            "per_start_phase": per_start_phase(self.episodes),
+            "per_episode": [e.to_dict() for e in self.episodes],
+        }
+
+
+PHASE_SECTOR_DEG = 45
+
+
+def per_start_phase(episodes: Sequence[EpisodeResult]) -> dict[str, dict[str, Any]]:
+    """Score and drop rate by the goal's start phase, in 45-degree sectors ("0-45", ...).
+
+    Empty unless the start phase varies between episodes (stages with random phases, P2's
+    random start offsets): a policy's average can hide sectors where it always drops the balls.
+    """
+    phased = [e for e in episodes if e.start_phase is not None]
+    if len({e.start_phase for e in phased}) < 2:
+        return {}
+    sectors: dict[int, list[EpisodeResult]] = {}
+    for e in phased:
+        sectors.setdefault(phase_sector(e.start_phase), []).append(e)
+    return {sector_name(k): {"episodes": len(members), "score": official_score(members),
+                             "drop_rate": drop_rate(members)}
+            for k, members in sorted(sectors.items())}
+
+
+def phase_sector(phase: float) -> int:
+    """Index of the 45-degree sector holding a start phase in radians [0, 2 pi)."""
+    # min(): a phase that rounds to exactly 2 pi belongs to the last sector
+    return min(int(math.degrees(phase) // PHASE_SECTOR_DEG), 360 // PHASE_SECTOR_DEG - 1)
+
+
+def sector_name(index: int) -> str:
+    return f"{index * PHASE_SECTOR_DEG}-{(index + 1) * PHASE_SECTOR_DEG}"
+
+
+
+def make_env(choice: EnvChoice, render: bool = False):
+    if choice.official:
+        import gymnasium as gym
+
+        try:
+            import myosuite  # noqa: F401  (registers the official ids)
+        except ImportError:
+            raise EvaluationError("--official needs the myosuite package: pip install myosuite==3.0.0") from None
+        return gym.make(OFFICIAL_IDS[(choice.task, choice.name)])
+    return TASK_SPECS[choice.task].env_class()(render_mode="rgb_array" if render else None, **choice.knobs)
+
+
+def _official_direction(env) -> str | None:
+    which = getattr(env.unwrapped, "which_task", None)
+    return _OFFICIAL_DIRECTIONS[which.value] if which is not None else None
+
+
+def run_episode(policy: LoadedPolicy, env, choice: EnvChoice, seed: int, frames: list | None = None) -> EpisodeResult:
+    """One deterministic episode; the LSTM state starts fresh. With ``frames``, each step's
+    rendered image and whether the step was solved are appended to it."""
+    obs, _ = env.reset(seed=seed)
+    state, start = None, True
+    solved = length = 0
+    effort = 0.0
+    while True:
+        action, state = policy.act(obs, state, start)
+        start = False
+        obs, _, terminated, truncated, info = env.step(action)
+        if frames is not None:
+            frames.append((env.render(), bool(info["solved"])))
+        length += 1
+        solved += int(bool(info["solved"]))
+        effort -= float(info["act_reg"])
+        if terminated or truncated:
+            break
+    if not choice.official:
+        return info["episode_result"]
+    horizon = env.spec.max_episode_steps
+    return EpisodeResult(solved_steps=solved, length=length, horizon=horizon, dropped=bool(terminated),
+                         effort=effort / length, direction=_official_direction(env), task=choice.task)
+
+
+def _episodes_worker(args: tuple[CheckpointRef, EnvChoice, list[int]]) -> list[EpisodeResult]:
+    import torch
+
+    ref, choice, seeds = args
+    torch.set_num_threads(1)  # the same arithmetic whatever the number of workers
+    policy = load_policy(ref, choice.task)
+    env = make_env(choice)
+    return [run_episode(policy, env, choice, seed) for seed in seeds]
+
+
+def evaluate(ref: CheckpointRef, choice: EnvChoice, episodes: int, seed: int = 0, workers: int = 1) -> EvaluationReport:
+    """Run ``episodes`` deterministic episodes (seeds ``seed .. seed + episodes - 1``)."""
+    load_policy(ref, choice.task)  # fail early, in this process, with a clear message
+    seeds = [seed + i for i in range(episodes)]
+    workers = max(1, min(workers, episodes))
+    if workers == 1:
+        results = _episodes_worker((ref, choice, seeds))
+    else:
+        chunks = [seeds[i::workers] for i in range(workers)]
+        with multiprocessing.get_context("spawn").Pool(workers) as pool:
+            parts = pool.map(_episodes_worker, [(ref, choice, chunk) for chunk in chunks])
+        by_seed = {s: r for chunk, part in zip(chunks, parts) for s, r in zip(chunk, part)}
+        results = [by_seed[s] for s in seeds]
+    return EvaluationReport(ref, choice, seed, results)
+
+

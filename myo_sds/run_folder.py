@@ -1,0 +1,376 @@
+"""The run folder: the one place that knows its files, their names and their formats.
+
+::
+
+    RUN/
+      config.yaml, curriculum.yaml      the resolved run config and its own copy of the curriculum
+      command.txt, versions.json        how the run was started, with which package versions
+      curriculum_state.json             the curriculum state of the latest checkpoint
+      episodes.csv                      one row per training episode
+      checkpoints/                      rl_model_<steps>_steps.zip, rl_model_vecnormalize_<steps>_steps.pkl,
+                                        curriculum_state_<steps>_steps.json, random_state_<steps>_steps.pkl
+      final_model.zip, final_vecnormalize.pkl
+      tb/                               TensorBoard events
+
+Every file is replaced in one rename (written under a temporary name first), so a crash or a
+``kill -9`` leaves the previous version readable.
+"""
+
+from __future__ import annotations
+
+import csv
+import enum
+import json
+import os
+import pickle
+import platform
+import sys
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+CONFIG_FILE = "config.yaml"
+CURRICULUM_FILE = "curriculum.yaml"
+STATE_FILE = "curriculum_state.json"
+EPISODES_FILE = "episodes.csv"
+CHECKPOINT_DIR = "checkpoints"
+LATEST_FILE = "latest.json"
+FINAL_MODEL = "final_model.zip"
+FINAL_VECNORMALIZE = "final_vecnormalize.pkl"
+EPISODE_COLUMNS = ("step", "wall_s", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
+                   "effort", "direction", "start_phase")
+
+
+class RunStatus(str, enum.Enum):
+    """Where a run stands; the first three can be resumed (budget_reached with a larger budget)."""
+
+    RUNNING = "running"
+    INTERRUPTED = "interrupted"  # Ctrl-C or SIGTERM
+    TIME_LIMIT = "time_limit"  # --max-hours
+    BUDGET_REACHED = "budget_reached"  # total_steps spent
+    COMPLETED = "completed"  # the last stage passed
+    STOPPED = "stopped"  # a stage ran out of steps with on_max_steps: stop
+
+
+@dataclass(frozen=True)
+class Transition:
+    """A stage's end: passed, timed out (and the run went on) or stopped the run."""
+
+    stage: str
+    stage_index: int
+    decision: str  # an advancement Decision's value: passed | timed_out | stop
+    at_step: int  # the run's env step count when it happened
+    stage_steps: int
+    stage_episodes: int
+    measured: float  # the advancement metric over the stage's window
+
+
+@dataclass
+class CurriculumState:
+    """Where the run is in its curriculum; saved with every checkpoint."""
+
+    stage_index: int = 0
+    stage_start_step: int = 0
+    stage_episodes: int = 0
+    recent: list[float] = field(default_factory=list)  # the advancement window's values
+    episodes_per_stage: dict[str, int] = field(default_factory=dict)
+    steps_per_stage: dict[str, int] = field(default_factory=dict)
+    history: list[Transition] = field(default_factory=list)
+    status: RunStatus = RunStatus.RUNNING
+    num_timesteps: int = 0
+    wall_s: float = 0.0  # training wall time so far, over all sessions of the run
+
+    def stage_starts(self) -> list[int]:
+        """The env step at which each stage reached so far began."""
+        return [0] + [t.at_step for t in self.history]
+
+    def to_json(self) -> str:
+        values = asdict(self)
+        values["status"] = self.status.value
+        return json.dumps(values, indent=2)
+
+    @classmethod
+    def from_json(cls, text: str) -> "CurriculumState":
+        values = json.loads(text)
+        values["status"] = RunStatus(values["status"])
+        values["history"] = [Transition(**entry) for entry in values.get("history", [])]
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """One row of ``episodes.csv``: a training episode and when it ended."""
+
+    step: int
+    wall_s: float  # the run's training wall time when the episode ended
+    stage_index: int
+    stage: str
+    score: float
+    solved_steps: int
+    length: int
+    dropped: bool
+    effort: float
+    direction: str
+    start_phase: float | None  # rad; None in runs begun before it was logged
+
+    def to_row(self) -> tuple:
+        phase = "" if self.start_phase is None else f"{self.start_phase:.4f}"
+        return (self.step, f"{self.wall_s:.2f}", self.stage_index, self.stage, f"{self.score:.6g}", self.solved_steps,
+                self.length, int(self.dropped), f"{self.effort:.6g}", self.direction or "", phase)
+
+    @classmethod
+    def from_row(cls, row: dict[str, str]) -> "EpisodeRecord":
+        phase = row.get("start_phase") or ""
+        return cls(int(row["step"]), float(row["wall_s"]), int(row["stage_index"]), row["stage"], float(row["score"]),
+                   int(row["solved_steps"]), int(row["length"]), row["dropped"] == "1", float(row["effort"]),
+                   row["direction"], float(phase) if phase else None)
+
+
+@dataclass(frozen=True)
+class CheckpointFiles:
+    """A checkpoint's files. The random state is optional: checkpoints written before it
+    existed resume with streams seeded from the run's seed and step count."""
+
+    steps: int
+    model: Path
+    vecnormalize: Path
+    state: Path
+    random_state: Path
+
+    def __iter__(self):
+        return iter((self.model, self.vecnormalize, self.state, self.random_state))
+
+    def complete(self) -> bool:
+        return all(path.is_file() for path in (self.model, self.vecnormalize, self.state))
+
+    def read_state(self) -> CurriculumState:
+        return CurriculumState.from_json(self.state.read_text())
+
+    def read_random_state(self) -> dict[str, Any] | None:
+        return pickle.loads(self.random_state.read_bytes()) if self.random_state.is_file() else None
+
+
+def checkpoint_files(folder: Path, steps: int) -> CheckpointFiles:
+    """SB3's names for a checkpoint's model and statistics, plus our curriculum state and the
+    random generators' states."""
+    return CheckpointFiles(steps, folder / f"rl_model_{steps}_steps.zip",
+                           folder / f"rl_model_vecnormalize_{steps}_steps.pkl",
+                           folder / f"curriculum_state_{steps}_steps.json",
+                           folder / f"random_state_{steps}_steps.pkl")
+
+
+def statistics_beside(model: Path) -> Path:
+    """The normalization statistics saved beside a model file, under SB3's names."""
+    name = model.name
+    if name.startswith("rl_model_") and name.endswith("_steps.zip"):
+        return model.with_name(name.replace("rl_model_", "rl_model_vecnormalize_").replace(".zip", ".pkl"))
+    return model.with_name(name.replace("model", "vecnormalize").replace(".zip", ".pkl"))
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _atomic_save(path: Path, save) -> None:
+    """Run ``save(tmp_path)`` and rename the result into place."""
+    tmp = path.with_name(f".tmp_{path.name}")
+    save(tmp)
+    os.replace(tmp, path)
+
+
+def package_versions() -> dict[str, str]:
+    from importlib import metadata
+
+    versions = {"python": platform.python_version(), "platform": platform.platform()}
+    for name in ("mujoco", "gymnasium", "stable-baselines3", "sb3-contrib", "torch", "numpy", "myosuite"):
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+class RunFolder:
+    """A run folder on disk (see the module docstring for its layout)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+
+    def __repr__(self) -> str:
+        return f"RunFolder({str(self.path)!r})"
+
+    # creation and provenance -----------------------------------------------------------
+
+    @classmethod
+    def create(cls, output_dir: Path, config_name: str, seed: int) -> "RunFolder":
+        """A fresh, race-free folder ``<output_dir>/<config>-<date>-<time>-s<seed>[-n]``."""
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        base = Path(output_dir) / f"{config_name}-{stamp}-s{seed}"
+        for attempt in range(1000):
+            candidate = base if attempt == 0 else base.with_name(f"{base.name}-{attempt}")
+            try:
+                candidate.mkdir(parents=True, exist_ok=False)
+                return cls(candidate)
+            except FileExistsError:
+                continue
+        raise RuntimeError(f"could not create a run folder next to {base}")
+
+    def write_provenance(self, config_yaml: str, curriculum_yaml: str) -> None:
+        """The resolved config (pointing at the folder's own copy of the curriculum), that
+        copy, the command line and the package versions."""
+        (self.path / CURRICULUM_FILE).write_text(curriculum_yaml)
+        (self.path / CONFIG_FILE).write_text(config_yaml)
+        command, versions = self.provenance_files
+        command.write_text(" ".join(sys.argv) + "\n")
+        versions.write_text(json.dumps(package_versions(), indent=2))
+
+    @property
+    def provenance_files(self) -> tuple[Path, Path]:
+        """The command line and the package versions."""
+        return self.path / "command.txt", self.path / "versions.json"
+
+    @property
+    def config_file(self) -> Path:
+        return self.path / CONFIG_FILE
+
+    @property
+    def curriculum_file(self) -> Path:
+        return self.path / CURRICULUM_FILE
+
+    @property
+    def tensorboard_dir(self) -> Path:
+        return self.path / "tb"
+
+    @property
+    def checkpoint_dir(self) -> Path:
+        return self.path / CHECKPOINT_DIR
+
+    def looks_like_run(self) -> bool:
+        return self.config_file.is_file() and self.checkpoint_dir.is_dir()
+
+    @classmethod
+    def containing(cls, path: Path) -> "RunFolder | None":
+        """The run folder that is ``path`` or holds it (a checkpoint file, ``checkpoints/``)."""
+        path = Path(path)
+        for folder in (path, path.parent, path.parent.parent):
+            if cls(folder).looks_like_run():
+                return cls(folder)
+        return None
+
+    # curriculum state ------------------------------------------------------------------
+
+    def read_state(self) -> CurriculumState | None:
+        """The state of the latest checkpoint, None before the first one."""
+        path = self.path / STATE_FILE
+        return CurriculumState.from_json(path.read_text()) if path.is_file() else None
+
+    # checkpoints -----------------------------------------------------------------------
+
+    def checkpoint(self, steps: int) -> CheckpointFiles:
+        return checkpoint_files(self.checkpoint_dir, steps)
+
+    def checkpoint_steps(self) -> list[int]:
+        """Steps of the checkpoints whose model file exists, in increasing order."""
+        steps = []
+        for path in self.checkpoint_dir.glob("rl_model_*_steps.zip"):
+            try:
+                steps.append(int(path.name[len("rl_model_"):-len("_steps.zip")]))
+            except ValueError:
+                continue
+        return sorted(steps)
+
+    def latest_checkpoint(self) -> CheckpointFiles | None:
+        """The newest checkpoint whose files all exist."""
+        for steps in reversed(self.checkpoint_steps()):
+            files = self.checkpoint(steps)
+            if files.complete():
+                return files
+        return None
+
+    def save_checkpoint(self, model, venv, state: CurriculumState, random_state: dict[str, Any],
+                        keep: int) -> CheckpointFiles:
+        """Model (with optimizer), normalization statistics, curriculum state and random
+        generators of one step, each renamed into place, then the folder's state file; the
+        oldest checkpoints beyond ``keep`` are removed."""
+        self.checkpoint_dir.mkdir(parents=True, exist_ok=True)
+        files = self.checkpoint(state.num_timesteps)
+        _atomic_save(files.model, model.save)
+        _atomic_save(files.vecnormalize, lambda tmp: venv.save(str(tmp)))
+        _atomic_save(files.random_state, lambda tmp: tmp.write_bytes(pickle.dumps(random_state)))
+        atomic_write_text(files.state, state.to_json())
+        atomic_write_text(self.checkpoint_dir / LATEST_FILE, json.dumps({"steps": state.num_timesteps}))
+        atomic_write_text(self.path / STATE_FILE, state.to_json())
+        for old in self.checkpoint_steps()[:-keep]:
+            for path in self.checkpoint(old):
+                path.unlink(missing_ok=True)
+        return files
+
+    @property
+    def final_model(self) -> Path:
+        return self.path / FINAL_MODEL
+
+    @property
+    def final_vecnormalize(self) -> Path:
+        return self.path / FINAL_VECNORMALIZE
+
+    def save_final(self, model, venv) -> None:
+        _atomic_save(self.final_model, model.save)
+        _atomic_save(self.final_vecnormalize, lambda tmp: venv.save(str(tmp)))
+
+    # episodes --------------------------------------------------------------------------
+
+    @property
+    def episodes_file(self) -> Path:
+        return self.path / EPISODES_FILE
+
+    def append_episodes(self, records: Iterable[EpisodeRecord]) -> None:
+        """Add rows to ``episodes.csv``; a run begun before the last columns existed keeps its
+        header, and its rows match it."""
+        path = self.episodes_file
+        new = not path.exists()
+        n_columns = len(EPISODE_COLUMNS) if new else len(self._episode_header())
+        with path.open("a", newline="") as file:
+            writer = csv.writer(file)
+            if new:
+                writer.writerow(EPISODE_COLUMNS)
+            for record in records:
+                writer.writerow(record.to_row()[:n_columns])
+
+    def read_episodes(self) -> list[EpisodeRecord]:
+        if not self.episodes_file.is_file():
+            return []
+        with self.episodes_file.open(newline="") as file:
+            return [EpisodeRecord.from_row(row) for row in csv.DictReader(file)]
+
+    def truncate_episodes(self, max_step: int) -> None:
+        """Drop episodes logged after the checkpoint a resumed run restarts from, and a row
+        that a kill cut short."""
+        path = self.episodes_file
+        if not path.exists():
+            return
+        with path.open(newline="") as file:
+            rows = list(csv.reader(file))
+        if not rows:
+            path.unlink()
+            return
+        header = rows[0]
+
+        def kept(row: Sequence[str]) -> bool:
+            try:
+                return len(row) == len(header) and int(row[0]) <= max_step
+            except ValueError:
+                return False
+
+        tmp = path.with_name(f".{path.name}.tmp")
+        with tmp.open("w", newline="") as file:
+            csv.writer(file).writerows([header] + [row for row in rows[1:] if kept(row)])
+        os.replace(tmp, path)
+
+    def _episode_header(self) -> list[str]:
+        with self.episodes_file.open(newline="") as file:
+            return next(csv.reader(file), [])
+

@@ -1,0 +1,90 @@
+"""The SB3 callback that watches rollouts for the trainer, and the update's minibatch hook."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+from myo_sds.envs.metrics import EpisodeResult
+from myo_sds.threads import UpdateThreads
+
+
+class UpdateInterrupted(Exception):
+    """Raised between two minibatches of a PPO update when a stop was requested."""
+
+
+class EpisodeCollector(BaseCallback):
+    """SB3 callback: gathers finished episodes of the current stage (with the env step and
+    the run's training wall time at which each ended), logs reward terms, drives the progress
+    bar, sets torch's threads for each phase, and stops ``learn`` when a stop was requested."""
+
+    def __init__(self, n_envs: int, stage_index: int, terms: tuple[str, ...], run_wall_s: Callable[[], float],
+                 update_threads: UpdateThreads) -> None:
+        super().__init__(verbose=0)
+        self.run_wall_s = run_wall_s
+        self.update_threads = update_threads
+        self.rollout_ended_at: float | None = None  # None while a rollout is being collected
+        self.terms = tuple(t for t in terms if t != "done")
+        self.stage_index = stage_index
+        self.episode_stage = [stage_index] * n_envs  # stage each env's current episode began in
+        self.results: list[tuple[int, float, EpisodeResult]] = []
+        self.term_sums: dict[str, float] = {}
+        self.term_count = 0
+        self.stop_requested: str | None = None
+        self.progress_bar: Any = None
+
+    def _on_step(self) -> bool:
+        infos, dones = self.locals["infos"], self.locals["dones"]
+        wall_s = self.run_wall_s() if dones.any() else 0.0
+        for rank, (info, done) in enumerate(zip(infos, dones)):
+            for key in self.terms:
+                self.term_sums[key] = self.term_sums.get(key, 0.0) + info.get(key, 0.0)
+            if done:
+                result = info.get("episode_result")
+                if result is not None and self.episode_stage[rank] == self.stage_index:
+                    self.results.append((self.num_timesteps, wall_s, result))
+                self.episode_stage[rank] = self.stage_index
+        self.term_count += len(infos)
+        if self.progress_bar is not None:
+            self.progress_bar.update(len(infos))
+        return self.stop_requested is None
+
+    def _on_rollout_start(self) -> None:
+        # Env threads need the cores while collecting; torch's idle OpenMP workers would
+        # spin on them. Policy inference on a few dozen observations needs one thread.
+        self._set_threads(1)
+        self.rollout_ended_at = None
+
+    def _on_rollout_end(self) -> None:
+        self.rollout_ended_at = time.perf_counter()
+        self._set_threads(self.update_threads.threads())
+
+    def before_optimizer_step(self, optimizer, args, kwargs) -> None:
+        """Optimizer pre-hook, once per minibatch: stop here if asked to (the weights and the
+        optimizer state stay those of the last finished minibatch); otherwise make room for
+        other processes that started using the CPUs during the update."""
+        if self.stop_requested:
+            raise UpdateInterrupted(self.stop_requested)
+        self._set_threads(self.update_threads.threads())
+
+    @staticmethod
+    def _set_threads(threads: int) -> None:
+        import torch
+
+        if torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)
+
+    def pop_results(self) -> list[tuple[int, float, EpisodeResult]]:
+        results, self.results = self.results, []
+        return results
+
+    def pop_term_means(self) -> dict[str, float]:
+        means = {k: v / self.term_count for k, v in self.term_sums.items()} if self.term_count else {}
+        self.term_sums, self.term_count = {}, 0
+        return means
+
+
+# -- the run -----------------------------------------------------------------------------

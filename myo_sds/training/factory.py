@@ -1,0 +1,97 @@
+"""Building what the trainer trains: the worker envs under one VecNormalize, and the model
+with the PPO settings in force."""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from myo_sds.curricula.schedule import PpoSettings
+from myo_sds.curricula.schema import RunConfig, Stage
+from myo_sds.envs.task_specs import TASK_SPECS
+
+
+def env_factory(task: str, knobs: Mapping[str, Any], seed: int) -> Callable[[], Any]:
+    """A picklable-enough factory (for SubprocVecEnv) of one env, reset once with ``seed``."""
+    def build():
+        if multiprocessing.current_process().name != "MainProcess":
+            # Ctrl-C goes to the whole process group: let the main process save and stop
+            # the workers, instead of the workers dying mid-step.
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        env = TASK_SPECS[task].env_class()(**knobs)
+        env.reset(seed=seed)
+        return env
+    return build
+
+
+def build_vec_env(config: RunConfig, stage: Stage):
+    """The training VecEnv (``n_envs`` workers, seeded ``seed + rank``) under VecNormalize."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+    from myo_sds.vec_env import ThreadVecEnv
+
+    factories = [env_factory(config.curriculum.task, stage.knobs, config.seed + rank) for rank in range(config.n_envs)]
+    if config.vec_env == "subproc":
+        venv = SubprocVecEnv(factories)
+    elif config.vec_env == "thread":
+        venv = ThreadVecEnv(factories, config.env_threads)
+    else:
+        venv = DummyVecEnv(factories)
+    venv.seed(config.seed)
+    norm = config.normalize
+    return VecNormalize(venv, norm_obs=norm.observations, norm_reward=norm.rewards,
+                        clip_obs=norm.clip_obs, clip_reward=norm.clip_reward, gamma=config.ppo.gamma)
+
+
+def build_model(config: RunConfig, venv, settings: PpoSettings):
+    """A new RecurrentPPO model over ``venv`` with the run's policy and ``settings``."""
+    import torch
+    from sb3_contrib import RecurrentPPO
+
+    from myo_sds.policy import SequenceLstmPolicy
+
+    activations = {"relu": torch.nn.ReLU, "tanh": torch.nn.Tanh, "elu": torch.nn.ELU,
+                   "leaky_relu": torch.nn.LeakyReLU}
+    policy, ppo = config.policy, config.ppo
+    policy_kwargs = {
+        "lstm_hidden_size": policy.lstm_hidden_size,
+        "enable_critic_lstm": policy.enable_critic_lstm,
+        "shared_lstm": False,
+        "net_arch": {"pi": list(policy.net_arch), "vf": list(policy.net_arch)},
+        "activation_fn": activations[policy.activation],
+        "log_std_init": policy.log_std_init,
+        "ortho_init": policy.ortho_init,
+    }
+    if policy.fast_lstm_update:
+        policy_kwargs["action_mean_bound"] = policy.action_mean_bound
+        policy_kwargs["action_head_lr_scale"] = policy.action_head_lr_scale
+    return RecurrentPPO(
+        SequenceLstmPolicy if policy.fast_lstm_update else "MlpLstmPolicy", venv,
+        learning_rate=settings.learning_rate, n_steps=settings.n_steps, batch_size=settings.batch_size,
+        n_epochs=settings.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=settings.clip_range,
+        ent_coef=settings.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm,
+        policy_kwargs=policy_kwargs, seed=config.seed, device=config.device, verbose=0)
+
+
+def apply_ppo_settings(model, settings: PpoSettings) -> None:
+    """Set learning rate, clip range, entropy coefficient, batch size, epochs and rollout length."""
+    from stable_baselines3.common.utils import ConstantSchedule
+
+    # The trainer runs one rollout and one update at a time, so SB3's progress-based schedules
+    # would restart every rollout: the rate is set from the env step count instead.
+    model.learning_rate = settings.learning_rate
+    model.lr_schedule = ConstantSchedule(settings.learning_rate)
+    model.clip_range = ConstantSchedule(settings.clip_range)
+    model.ent_coef = settings.ent_coef
+    model.batch_size = settings.batch_size
+    model.n_epochs = settings.n_epochs
+    if settings.n_steps != model.n_steps:
+        model.n_steps = settings.n_steps
+        buffer = model.rollout_buffer
+        lstm = model.policy.lstm_actor
+        model.rollout_buffer = type(buffer)(
+            model.n_steps, model.observation_space, model.action_space,
+            (model.n_steps, lstm.num_layers, model.n_envs, lstm.hidden_size), model.device,
+            gamma=model.gamma, gae_lambda=model.gae_lambda, n_envs=model.n_envs)

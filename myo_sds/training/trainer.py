@@ -1,0 +1,334 @@
+"""The curriculum trainer: rollouts, updates and stage changes, into a run folder.
+
+Each iteration applies the PPO settings in force (``curricula.schedule``), collects one rollout
+(``training.rollout``), runs the PPO update, then feeds the stage's finished training episodes
+to the advancement rule (``curricula.advancement``). A stage change reaches every env in place
+(same model, same normalization statistics). Checkpoints and logs go to the run folder
+(``run_folder``).
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import signal
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from myo_sds.curricula.advancement import Decision, StageProgress, decide, episode_metric
+from myo_sds.curricula.schedule import ppo_settings_at
+from myo_sds.curricula.schema import ConfigError, RunConfig, Stage, load_run_config, stage_label
+from myo_sds.envs.task_specs import TASK_SPECS
+from myo_sds.run_folder import CurriculumState, EpisodeRecord, RunFolder, RunStatus, Transition
+from myo_sds.threads import UpdateThreads, available_cpus
+from myo_sds.training.callbacks import EpisodeCollector, UpdateInterrupted
+from myo_sds.training.factory import apply_ppo_settings, build_model, build_vec_env
+from myo_sds.training.progress import StageProgressBar
+from myo_sds.training.rollout import LocalRollouts, RolloutCollector
+
+RESUMABLE = (RunStatus.RUNNING, RunStatus.INTERRUPTED, RunStatus.TIME_LIMIT)
+
+
+@dataclass
+class RolloutTiming:
+    steps: int
+    wall_s: float
+    env_s: float
+    update_s: float
+
+
+def resumed_tensorboard_format(folder: str, purge_step: int):
+    """SB3's TensorBoard writer, opened with ``purge_step``: TensorBoard then hides the events
+    at or after that step from earlier event files (those a killed run logged after the
+    checkpoint it is resumed from)."""
+    from stable_baselines3.common.logger import TensorBoardOutputFormat
+    from torch.utils.tensorboard import SummaryWriter
+
+    output = TensorBoardOutputFormat.__new__(TensorBoardOutputFormat)  # its __init__ takes no purge_step
+    output.writer = SummaryWriter(log_dir=folder, purge_step=purge_step)
+    output._is_closed = False
+    return output
+
+
+class CurriculumTrainer:
+    """Train a RecurrentPPO policy through a curriculum into a run folder.
+
+    Use :meth:`start` for a new run and :meth:`resume` to continue one; then :meth:`run`.
+    """
+
+    def __init__(self, config: RunConfig, folder: RunFolder, state: CurriculumState, model,
+                 rollouts: RolloutCollector, progress: bool = True) -> None:
+        self.config, self.folder, self.state = config, folder, state
+        self.model, self.rollouts = model, rollouts
+        self.progress_bar = StageProgressBar(progress, len(config.curriculum.stages))
+        self.next_checkpoint = (state.num_timesteps // config.checkpoint_every + 1) * config.checkpoint_every
+        self.progress = StageProgress(steps=state.num_timesteps - state.stage_start_step,
+                                      episodes=state.stage_episodes)
+        self.progress.recent.extend(state.recent)
+        self.timings: list[RolloutTiming] = []
+        self.iteration_started_at = time.perf_counter()
+        self.update_threads = UpdateThreads(available_cpus(), fixed=config.num_threads or None)
+        self.collector = EpisodeCollector(config.n_envs, state.stage_index, TASK_SPECS[config.curriculum.task].reward_terms,
+                                          run_wall_s=lambda: self.state.wall_s + time.perf_counter() - self.iteration_started_at,
+                                          update_threads=self.update_threads)
+        self.minibatch_hook = model.policy.optimizer.register_step_pre_hook(self.collector.before_optimizer_step)
+        self.apply_ppo_settings()
+
+    @property
+    def run_dir(self) -> Path:
+        return self.folder.path
+
+    @property
+    def venv(self):
+        return self.rollouts.venv
+
+    @property
+    def stage(self) -> Stage:
+        return self.config.curriculum.stages[self.state.stage_index]
+
+    # construction ------------------------------------------------------------------------
+
+    @classmethod
+    def start(cls, config_path: str | Path, overrides: tuple[str, ...] = (), run_dir: Path | None = None,
+              overwrite: bool = False, progress: bool = True) -> "CurriculumTrainer":
+        """Validate the config, create the run folder and a new model at stage 1."""
+        from stable_baselines3.common.logger import configure
+        from stable_baselines3.common.utils import set_random_seed
+
+        config_path = Path(config_path)
+        config = load_run_config(config_path, overrides)
+        if run_dir is None:
+            folder = RunFolder.create(config.output_dir, config_path.stem, config.seed)
+        else:
+            run_dir = Path(run_dir)
+            if run_dir.exists() and any(run_dir.iterdir()):
+                if not overwrite:
+                    raise ConfigError(f"{run_dir}: run folder exists and is not empty; use --resume "
+                                      "to continue it or --overwrite to replace it")
+                shutil.rmtree(run_dir)
+            run_dir.mkdir(parents=True, exist_ok=True)
+            folder = RunFolder(run_dir)
+        # The run folder is self-contained: its config points at its own copy of the curriculum.
+        resolved = {**config.source, "curriculum": folder.curriculum_file.name, "seed": config.seed}
+        folder.write_provenance(yaml.safe_dump(resolved, sort_keys=False), config.curriculum_path.read_text())
+        set_random_seed(config.seed)
+        state = CurriculumState()
+        venv = build_vec_env(config, config.curriculum.stages[0])
+        model = build_model(config, venv, ppo_settings_at(config, 0, state.stage_starts(), 0))
+        model.set_logger(configure(str(folder.tensorboard_dir), ["tensorboard"]))
+        return cls(config, folder, state, model, LocalRollouts(venv), progress)
+
+    @classmethod
+    def resume(cls, run_dir: str | Path, progress: bool = True,
+               total_steps: int | None = None) -> "CurriculumTrainer":
+        """Continue a run from its latest complete checkpoint: same stage, counters, optimizer,
+        normalization state and random streams, same TensorBoard folder. ``total_steps`` raises
+        the run's step budget (recorded in its config.yaml), which also continues a run that
+        ended at its budget."""
+        from stable_baselines3.common.logger import Logger
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        from myo_sds.policy import load_model
+
+        folder = RunFolder(run_dir)
+        config = load_run_config(folder.config_file)
+        checkpoint = folder.latest_checkpoint()
+        if checkpoint is None:
+            raise ConfigError(f"{folder.path}: no complete checkpoint to resume from")
+        state = checkpoint.read_state()
+        resumable = RESUMABLE + ((RunStatus.BUDGET_REACHED,) if total_steps else ())
+        if state.status not in resumable:
+            hint = ("; add --total-steps N to train on to N steps" if state.status is RunStatus.BUDGET_REACHED
+                    else "; nothing to resume")
+            raise ConfigError(f"{folder.path}: the run already ended ({state.status.value}){hint}")
+        if total_steps is not None:
+            if total_steps <= state.num_timesteps:
+                raise ConfigError(f"{folder.config_file}: total_steps {total_steps} must exceed the "
+                                  f"{state.num_timesteps} steps already trained")
+            config = load_run_config(folder.config_file, (f"total_steps={total_steps}",))
+            folder.config_file.write_text(yaml.safe_dump(dict(config.source), sort_keys=False))
+        state.status = RunStatus.RUNNING
+        stage = config.curriculum.stages[state.stage_index]
+        venv = VecNormalize.load(str(checkpoint.vecnormalize), build_vec_env(config, stage).venv)
+        venv.training = True
+        model = load_model(str(checkpoint.model), env=venv, device=config.device)
+        rollouts = LocalRollouts(venv)
+        # Loading reseeds torch, numpy and the envs' next reset with the run's seed: continue
+        # the streams of the checkpoint instead, so the resumed run draws new episodes.
+        rollouts.restore_random_state(checkpoint.read_random_state(), fallback_seed=config.seed + state.num_timesteps)
+        # Events a killed run logged after this checkpoint are hidden from TensorBoard.
+        tb = str(folder.tensorboard_dir)
+        model.set_logger(Logger(tb, [resumed_tensorboard_format(tb, purge_step=state.num_timesteps + 1)]))
+        folder.truncate_episodes(state.num_timesteps)
+        return cls(config, folder, state, model, rollouts, progress)
+
+    # the loop ----------------------------------------------------------------------------
+
+    def apply_ppo_settings(self) -> None:
+        """Give the model the PPO settings in force at the current stage and step."""
+        apply_ppo_settings(self.model, ppo_settings_at(self.config, self.state.stage_index, self.state.stage_starts(),
+                                                       int(self.model.num_timesteps)))
+
+    def run(self, max_wall_s: float | None = None) -> CurriculumState:
+        """Train until the curriculum completes or stops, the step budget is spent, or a
+        SIGINT/SIGTERM arrives or this call has trained for ``max_wall_s`` seconds (then a
+        checkpoint is written and the run can be resumed)."""
+        config, model, state, collector = self.config, self.model, self.state, self.collector
+        collector.progress_bar = self.progress_bar
+        previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+        def request_stop(signum, frame):
+            collector.stop_requested = signal.Signals(signum).name
+            signal.signal(signal.SIGINT, signal.default_int_handler)  # a second Ctrl-C aborts
+
+        for sig in previous:
+            signal.signal(sig, request_stop)
+        start_wall = state.wall_s
+        # SB3's setup for training: the callback, and the first reset (or the LSTM states of a
+        # loaded model); the trainer then drives rollouts and updates itself.
+        _, callback = model._setup_learn(config.total_steps, collector, reset_num_timesteps=False)
+        callback.on_training_start(locals(), globals())
+        try:
+            self._start_stage_display()
+            while state.status is RunStatus.RUNNING:
+                if model.num_timesteps >= config.total_steps:
+                    state.status = RunStatus.BUDGET_REACHED
+                    break
+                if max_wall_s is not None and state.wall_s - start_wall >= max_wall_s:
+                    state.status = RunStatus.TIME_LIMIT
+                    self.progress_bar.write(f"time limit of {max_wall_s:.0f} s reached; continue with "
+                                            f"`python train.py --resume {self.run_dir}`")
+                    break
+                self.apply_ppo_settings()  # a decaying rate or a warm-up's end acts between rollouts
+                self._iterate()
+                self._after_rollout()
+                if collector.stop_requested:
+                    state.status = RunStatus.INTERRUPTED
+                    self.progress_bar.write(f"{collector.stop_requested}: saving a checkpoint; continue with "
+                                            f"`python train.py --resume {self.run_dir}`")
+                    break
+                self.progress_bar.describe(self.progress.measured, self._rule_text(), model.num_timesteps)
+                if model.num_timesteps >= self.next_checkpoint and state.status is RunStatus.RUNNING:
+                    self.save_checkpoint()
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+            self.progress_bar.close()
+        callback.on_training_end()
+        self.save_checkpoint()
+        if state.status not in (RunStatus.INTERRUPTED, RunStatus.TIME_LIMIT):
+            self.folder.save_final(model, self.venv)
+        return state
+
+    def _iterate(self) -> None:
+        """One rollout and, unless a stop cut the rollout short, one PPO update."""
+        model, collector = self.model, self.collector
+        steps_before, self.iteration_started_at = model.num_timesteps, time.perf_counter()
+        env_before = self.rollouts.env_seconds
+        complete = self.rollouts.collect(model, collector)
+        updated_at = time.perf_counter()
+        if complete:
+            try:
+                model.train()
+            except UpdateInterrupted:
+                pass  # stopped between minibatches: weights and optimizer are consistent
+        finished_at = time.perf_counter()
+        self.state.wall_s += finished_at - self.iteration_started_at
+        self.timings.append(RolloutTiming(model.num_timesteps - steps_before, finished_at - self.iteration_started_at,
+                                          self.rollouts.env_seconds - env_before,
+                                          finished_at - updated_at if complete else 0.0))
+
+    def _rule_text(self) -> str:
+        rule = self.stage.advance
+        if rule is None:
+            return "no advancement rule"
+        return f"{rule.metric} {{value}} of {rule.threshold} over {len(self.progress.recent)}/{rule.window} episodes"
+
+    def _start_stage_display(self) -> None:
+        state = self.state
+        self.progress_bar.start_stage(state.stage_index, self.stage, self.progress.steps, int(self.model.num_timesteps),
+                                      self.config.total_steps)
+
+    def _after_rollout(self) -> None:
+        model, state, collector = self.model, self.state, self.collector
+        results = collector.pop_results()
+        rule = self.stage.advance
+        metric = rule.metric if rule else "score"
+        window = rule.window if rule else 100
+        self.progress.record((episode_metric(metric, r) for _, _, r in results), window)
+        self.progress.steps = model.num_timesteps - state.stage_start_step
+        self.folder.append_episodes(
+            EpisodeRecord(step, wall_s, state.stage_index, self.stage.name, r.score, r.solved_steps, r.length,
+                          r.dropped, r.effort, r.direction, r.start_phase) for step, wall_s, r in results)
+        logger = model.logger
+        for key, value in collector.pop_term_means().items():
+            logger.record(f"reward/{key}", value)
+        if results:
+            episodes = [r for _, _, r in results]
+            logger.record("rollout/score", float(np.mean([r.score for r in episodes])))
+            logger.record("rollout/effort", float(np.mean([r.effort for r in episodes])))
+            logger.record("rollout/drop_rate", float(np.mean([r.dropped for r in episodes])))
+        timing = self.timings[-1] if self.timings else None
+        if timing and timing.wall_s > 0:
+            logger.record("time/env_steps_per_s", timing.steps / timing.wall_s)
+            logger.record("time/env_stepping_share", timing.env_s / timing.wall_s)
+            logger.record("time/update_share", timing.update_s / timing.wall_s)
+        logger.record("time/update_threads", self.update_threads.current)
+        logger.record("curriculum/stage_index", state.stage_index)
+        logger.record("curriculum/stage_steps", self.progress.steps)
+        if not math.isnan(self.progress.measured):
+            logger.record("curriculum/measured", self.progress.measured)
+        decision = decide(rule, self.progress)
+        if decision is not Decision.STAY:
+            self._transition(decision)
+        logger.dump(model.num_timesteps)
+        self._sync_state()
+
+    def _transition(self, decision: Decision) -> None:
+        state, model, config = self.state, self.model, self.config
+        stage = self.stage
+        state.history.append(Transition(stage.name, state.stage_index, decision.value, int(model.num_timesteps),
+                                        self.progress.steps, self.progress.episodes, self.progress.measured))
+        state.episodes_per_stage[stage.name] = self.progress.episodes
+        state.steps_per_stage[stage.name] = self.progress.steps
+        verdict = {Decision.PASSED: "passed", Decision.TIMED_OUT: "ended unpassed (max_steps)",
+                   Decision.STOP: "ended unpassed"}[decision]
+        measured = self.progress.measured
+        self.progress_bar.write(f"{stage_label(state.stage_index, stage.name)} {verdict} at step {model.num_timesteps}: "
+                                + self._rule_text().format(value=f"{measured:.3f}"))
+        model.logger.record("curriculum/transition", state.stage_index + 1)
+        if decision is Decision.STOP:
+            state.status = RunStatus.STOPPED
+            return
+        if state.stage_index + 1 >= len(config.curriculum.stages):
+            state.status = RunStatus.COMPLETED
+            self.progress_bar.write("curriculum completed")
+            return
+        state.stage_index += 1
+        state.stage_start_step = int(model.num_timesteps)
+        self.progress = StageProgress()
+        self.collector.stage_index = state.stage_index
+        self.rollouts.set_stage(self.stage.knobs)
+        self.apply_ppo_settings()
+        self._start_stage_display()
+
+    def _sync_state(self) -> None:
+        state = self.state
+        state.num_timesteps = int(self.model.num_timesteps)
+        state.stage_episodes = self.progress.episodes
+        state.recent = list(self.progress.recent)
+        name = self.stage.name
+        state.episodes_per_stage[name] = self.progress.episodes
+        state.steps_per_stage[name] = self.progress.steps
+
+    def save_checkpoint(self) -> Path:
+        """Model, statistics, curriculum state and random streams of this step (``run_folder``)."""
+        self._sync_state()
+        files = self.folder.save_checkpoint(self.model, self.venv, self.state, self.rollouts.random_state(),
+                                            keep=self.config.keep_checkpoints)
+        self.next_checkpoint = (files.steps // self.config.checkpoint_every + 1) * self.config.checkpoint_every
+        return files.model
