@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 RUN_DIR := runs/quickstart
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test test-fast wheel-check bench clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,13 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest -q
+
+test-fast: setup
+	$(PY) -m pytest -q -m "not slow"
+
+# The wheel in a fresh venv, its commands run from another folder (CI runs this too).
+wheel-check:
+	.ci/wheel_check
 
 bench: setup
 	$(PY) benchmarks/env_speed.py

@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-
 from myo_sds.envs.task_specs import TASK_SPECS
 
 

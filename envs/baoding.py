@@ -24,27 +24,26 @@ from typing import Any
 
 import mujoco
 import numpy as np
-
-from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
 from myo_sds.envs.baoding_task import (  # noqa: F401  (re-exported: the env's public names)
-    MODEL_FILE,
-    HORIZON,
-    FRAME_SKIP,
-    DIRECTIONS,
     _DIRECTION_SIGN,
+    DIRECTIONS,
+    FRAME_SKIP,
+    HORIZON,
+    KNOB_HELP,
+    MODEL_FILE,
+    N_HAND_JOINTS,
+    N_WRIST_JOINTS,
+    NOMINAL_FRICTION,
     OFFICIAL_START_ANGLE,
     ON_BALLS_START_ANGLE,
     ORBIT_CENTER,
-    NOMINAL_FRICTION,
-    REWARD_TERMS,
-    N_HAND_JOINTS,
-    N_WRIST_JOINTS,
-    KNOB_HELP,
     PRESETS,
-    BaodingTask,
+    REWARD_TERMS,
     BaodingKnobs,
+    BaodingTask,
     parse_knobs,
 )
+from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
 
 
 class BaodingEnv(MuscleHandEnv):

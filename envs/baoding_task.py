@@ -11,7 +11,6 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
-
 from myo_sds.envs.knobs import (
     Range,
     check_complete,

@@ -18,21 +18,20 @@ from typing import Any
 
 import mujoco
 import numpy as np
-
-from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
-from myo_sds.envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
 from myo_sds.envs.die_task import (  # noqa: F401  (re-exported: the env's public names)
-    MODEL_FILE,
-    HORIZON,
     FRAME_SKIP,
-    N_HAND_JOINTS,
-    REWARD_TERMS,
+    HORIZON,
     KNOB_HELP,
+    MODEL_FILE,
+    N_HAND_JOINTS,
     PRESETS,
-    DieTask,
+    REWARD_TERMS,
     DieKnobs,
+    DieTask,
     parse_knobs,
 )
+from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
+from myo_sds.envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
 
 
 class DieEnv(MuscleHandEnv):

@@ -9,8 +9,14 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
-
-from myo_sds.envs.knobs import Range, check_complete, merge_preset, parse_range, parse_weights, to_float
+from myo_sds.envs.knobs import (
+    Range,
+    check_complete,
+    merge_preset,
+    parse_range,
+    parse_weights,
+    to_float,
+)
 
 MODEL_FILE = "myohand_die.xml"
 HORIZON = 150  # control steps of 10 ms

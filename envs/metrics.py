@@ -15,7 +15,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-
 DIE_SUCCESS_STEPS = 5  # a die episode succeeds when solved on more steps than this
 
 

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-
-from myo_sds.curricula.advancement import Decision, StageProgress, decide, episode_metric
+from myo_sds.curricula.advancement import (
+    Decision,
+    StageProgress,
+    decide,
+    episode_metric,
+)
 from myo_sds.curricula.schema import AdvanceRule
 from myo_sds.envs.metrics import EpisodeResult
 

@@ -11,7 +11,6 @@ import math
 
 import numpy as np
 import pytest
-
 from myo_sds.envs.baoding import DIRECTIONS, BaodingEnv, BaodingTask
 
 gym = pytest.importorskip("gymnasium")

@@ -6,8 +6,13 @@ import re
 from pathlib import Path
 
 import pytest
-
-from myo_sds.curricula.schema import ConfigError, LearningRateDecay, PpoWarmup, load_curriculum, load_run_config
+from myo_sds.curricula.schema import (
+    ConfigError,
+    LearningRateDecay,
+    PpoWarmup,
+    load_curriculum,
+    load_run_config,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 

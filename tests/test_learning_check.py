@@ -4,9 +4,9 @@ import importlib.util
 from pathlib import Path
 
 import pytest
+from tiny_run import CURRICULUM, write_config
 
 from myo_sds.run_folder import RunFolder
-from tiny_run import CURRICULUM, write_config
 
 SPEC = importlib.util.spec_from_file_location(
     "learning_check", Path(__file__).resolve().parents[1] / "benchmarks" / "learning_check.py")

@@ -11,9 +11,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
+from tiny_run import CONFIG, CURRICULUM, write_config
+
 from myo_sds.run_folder import EpisodeRecord, RunFolder
 from myo_sds.training import CurriculumTrainer
-from tiny_run import CONFIG, CURRICULUM, write_config
 
 REPO = Path(__file__).resolve().parents[1]
 # Stage 1 never passes here, so every episode draws a random start phase from the same knobs.
@@ -45,14 +47,11 @@ def test_resume_continues_the_random_streams_and_is_reproducible(tmp_path):
     assert not start_phases & {row.start_phase for row in resumed[0]}
 
 
-def test_each_episode_row_has_its_own_wall_time(tmp_path):
-    config = write_config(tmp_path, total=1024, curriculum=ONE_STAGE)
-    CurriculumTrainer.start(config, run_dir=tmp_path / "run", progress=False).run()
-    rows = episode_rows(tmp_path / "run")
-    walls = [row.wall_s for row in rows]
+def test_each_episode_row_has_its_own_wall_time(tiny_run):
+    walls = [row.wall_s for row in episode_rows(tiny_run.path)]
     assert walls == sorted(walls)
-    # 8 rollouts of 128 steps: one wall time per rollout would give at most 8 values.
-    assert len(set(walls)) > 3 * 8
+    # One wall time per rollout would give at most one value per rollout.
+    assert len(set(walls)) > 2 * len(tiny_run.trainer.timings)
 
 
 def read_scalars(folder: Path, tag: str) -> list[int]:
@@ -63,6 +62,7 @@ def read_scalars(folder: Path, tag: str) -> list[int]:
     return [event.step for event in accumulator.Scalars(tag)]
 
 
+@pytest.mark.slow  # a real process and SIGKILL
 def test_resume_after_sigkill_continues_from_the_last_checkpoint_with_consistent_logs(tmp_path):
     config = write_config(tmp_path, total=1_000_000, curriculum=ONE_STAGE)
     config.write_text(config.read_text().replace("checkpoint_every: 256", "checkpoint_every: 1280"))
@@ -125,6 +125,7 @@ def test_a_stop_during_an_update_ends_it_before_the_next_minibatch(tmp_path):
     assert resumed.run().status == "budget_reached"
 
 
+@pytest.mark.slow  # a fresh interpreter, to see what it imported
 def test_a_config_error_is_reported_before_torch_and_mujoco_load(tmp_path):
     (tmp_path / "curriculum.yaml").write_text(CURRICULUM)
     (tmp_path / "run.yaml").write_text(CONFIG.format(total=100))

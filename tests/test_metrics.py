@@ -3,8 +3,13 @@
 import math
 
 import pytest
-
-from myo_sds.envs.metrics import EpisodeResult, official_score, drop_rate, mean_confidence_interval, mean_effort
+from myo_sds.envs.metrics import (
+    EpisodeResult,
+    drop_rate,
+    mean_confidence_interval,
+    mean_effort,
+    official_score,
+)
 
 
 def test_official_score_counts_steps_lost_to_a_drop_as_unsolved():

@@ -11,20 +11,17 @@ from pathlib import Path
 
 import pytest
 import yaml
-
 from myo_sds.curricula.schema import ConfigError
+from tiny_run import CONFIG, CURRICULUM, write_config
+
 from myo_sds.run_folder import RunFolder, RunStatus
 from myo_sds.training import CurriculumTrainer
-from tiny_run import CONFIG, CURRICULUM, write_config
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def test_two_stage_run_advances_and_records_everything(tmp_path):
-    config = write_config(tmp_path, total=2048)
-    trainer = CurriculumTrainer.start(config, run_dir=tmp_path / "run", progress=False)
-    state = trainer.run()
-    run = tmp_path / "run"
+def test_two_stage_run_advances_and_records_everything(tiny_run):
+    trainer, state, run = tiny_run.trainer, tiny_run.state, tiny_run.path
     assert state.status == "budget_reached" and state.num_timesteps >= 2048
     assert state.stage_index == 1
     (transition,) = state.history
@@ -153,6 +150,7 @@ def run_train(args: list[str], cwd: Path, **kwargs) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kwargs)
 
 
+@pytest.mark.slow  # real processes and signals
 def test_sigint_saves_and_resume_continues_same_stage_and_counters(tmp_path):
     config = write_config(tmp_path, total=100_000)
     run = tmp_path / "run"
@@ -190,14 +188,14 @@ def test_sigint_saves_and_resume_continues_same_stage_and_counters(tmp_path):
     assert len(list(folder.tensorboard_dir.glob("events.out.tfevents.*"))) == 2  # same folder, one curve
 
 
-def test_bad_config_fails_before_training(tmp_path):
+def test_bad_config_fails_before_training(tmp_path, capsys):
+    from myo_sds.cli.train import main
+
     (tmp_path / "curriculum.yaml").write_text(CURRICULUM.replace("threshold: 0.01", "threshold: 2"))
     (tmp_path / "run.yaml").write_text(CONFIG.format(total=100))
-    process = run_train(["--config", str(tmp_path / "run.yaml"), "--run-dir", str(tmp_path / "run")], tmp_path)
-    output, _ = process.communicate(timeout=120)
-    assert process.returncode == 2
-    assert "curriculum.yaml: stage 1 (easy) advance.threshold: must be <= 1, got 2" in output
-    assert "Traceback" not in output
+    assert main(["--config", str(tmp_path / "run.yaml"), "--run-dir", str(tmp_path / "run")]) == 2
+    assert capsys.readouterr().err == (f"error: {tmp_path / 'curriculum.yaml'}: stage 1 (easy) advance.threshold: "
+                                       "must be <= 1, got 2\n")
     assert not (tmp_path / "run").exists()
 
 

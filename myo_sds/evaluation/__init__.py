@@ -21,7 +21,11 @@ from myo_sds.evaluation.episodes import (
     run_episode,
     sector_name,
 )
-from myo_sds.evaluation.plots import plot_learning_curve, plot_score_histogram, trailing_mean
+from myo_sds.evaluation.plots import (
+    plot_learning_curve,
+    plot_score_histogram,
+    trailing_mean,
+)
 from myo_sds.evaluation.table import format_table
 from myo_sds.evaluation.video import chosen_episodes, record_video
 

@@ -15,8 +15,14 @@ from typing import Any
 
 import numpy as np
 
+from myo_sds.envs.metrics import (
+    EpisodeResult,
+    drop_rate,
+    mean_confidence_interval,
+    mean_effort,
+    official_score,
+)
 from myo_sds.envs.task_specs import TASK_SPECS
-from myo_sds.envs.metrics import EpisodeResult, drop_rate, mean_confidence_interval, mean_effort, official_score
 from myo_sds.evaluation.checkpoints import (
     _OFFICIAL_DIRECTIONS,
     OFFICIAL_IDS,
@@ -26,6 +32,7 @@ from myo_sds.evaluation.checkpoints import (
     LoadedPolicy,
     load_policy,
 )
+
 
 @dataclass
 class EvaluationReport:

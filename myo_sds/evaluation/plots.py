@@ -11,6 +11,7 @@ from myo_sds.evaluation.checkpoints import EvaluationError
 from myo_sds.evaluation.episodes import EvaluationReport, phase_sector, sector_name
 from myo_sds.run_folder import RunFolder, Transition
 
+
 def trailing_mean(values: np.ndarray, window: int) -> np.ndarray:
     """Mean of the last ``window`` values at each point (fewer at the start)."""
     sums = np.cumsum(np.insert(np.asarray(values, dtype=float), 0, 0.0))

@@ -6,6 +6,7 @@ from collections.abc import Callable, Sequence
 
 from myo_sds.evaluation.episodes import EvaluationReport
 
+
 def format_table(reports: Sequence[EvaluationReport]) -> str:
     """Side-by-side table, one column per (checkpoint, env)."""
     summaries = [r.summary() for r in reports]

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
 
 from myo_sds.evaluation.checkpoints import CheckpointRef, EnvChoice, load_policy
 from myo_sds.evaluation.episodes import EvaluationReport, make_env, run_episode
+
 
 def chosen_episodes(report: EvaluationReport, count: int) -> list[tuple[int, str]]:
     """Seeds and captions of the evaluation's best and worst episodes (by score, then length),
@@ -25,15 +27,22 @@ VIDEO_FPS = 40  # the control rate of the Baoding env: real time
 HOLD_LAST_FRAME_S = 2.0  # each episode's last frame stays this long, with its result
 
 
+@functools.lru_cache(maxsize=1)
+def _font():
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=18)
+    except TypeError:  # Pillow < 10.1 has one bitmap size
+        return ImageFont.load_default()
+
+
 def _overlay(frame: np.ndarray, lines: list[str]) -> np.ndarray:
-    from PIL import Image, ImageDraw, ImageFont
+    from PIL import Image, ImageDraw
 
     image = Image.fromarray(frame)
     draw = ImageDraw.Draw(image)
-    try:
-        font = ImageFont.load_default(size=18)
-    except TypeError:  # Pillow < 10.1 has one bitmap size
-        font = ImageFont.load_default()
+    font = _font()
     y = 8
     for line in lines:
         draw.text((10, y), line, fill=(255, 255, 255), font=font, stroke_width=2, stroke_fill=(0, 0, 0))

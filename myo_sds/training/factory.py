@@ -28,7 +28,11 @@ def env_factory(task: str, knobs: Mapping[str, Any], seed: int) -> Callable[[], 
 
 def build_vec_env(config: RunConfig, stage: Stage):
     """The training VecEnv (``n_envs`` workers, seeded ``seed + rank``) under VecNormalize."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import (
+        DummyVecEnv,
+        SubprocVecEnv,
+        VecNormalize,
+    )
 
     from myo_sds.vec_env import ThreadVecEnv
 

@@ -19,11 +19,28 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from myo_sds.curricula.advancement import Decision, StageProgress, decide, episode_metric
+from myo_sds.curricula.advancement import (
+    Decision,
+    StageProgress,
+    decide,
+    episode_metric,
+)
 from myo_sds.curricula.schedule import ppo_settings_at
-from myo_sds.curricula.schema import ConfigError, RunConfig, Stage, load_run_config, stage_label
+from myo_sds.curricula.schema import (
+    ConfigError,
+    RunConfig,
+    Stage,
+    load_run_config,
+    stage_label,
+)
 from myo_sds.envs.task_specs import TASK_SPECS
-from myo_sds.run_folder import CurriculumState, EpisodeRecord, RunFolder, RunStatus, Transition
+from myo_sds.run_folder import (
+    CurriculumState,
+    EpisodeRecord,
+    RunFolder,
+    RunStatus,
+    Transition,
+)
 from myo_sds.threads import UpdateThreads, available_cpus
 from myo_sds.training.callbacks import EpisodeCollector, UpdateInterrupted
 from myo_sds.training.factory import apply_ppo_settings, build_model, build_vec_env
