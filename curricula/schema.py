@@ -166,10 +166,13 @@ class PpoConfig:
 
 @dataclass(frozen=True)
 class NormalizeConfig:
+    """SB3's VecNormalize: running statistics of observations and discounted returns, one
+    instance for the whole run (its statistics carry across stages and are checkpointed)."""
+
     observations: bool = True
     rewards: bool = True
-    clip_obs: float = 10.0
-    clip_reward: float = 10.0
+    clip_obs: float = 10.0  # normalized observations are clipped to +-this
+    clip_reward: float = 10.0  # normalized rewards likewise
 
 
 @dataclass(frozen=True)

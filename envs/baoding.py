@@ -49,11 +49,7 @@ from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
 class BaodingEnv(MuscleHandEnv):
     """Rotate two balls around each other in the palm of the 39-muscle MyoHand.
 
-    Args:
-        preset: ``"p1"`` or ``"p2"``, the official phase's task distribution.
-        render_mode: ``None`` or ``"rgb_array"``.
-        horizon: control steps before truncation (official: 200).
-        **knobs: overrides of the preset; see :data:`KNOB_HELP`.
+    Constructor arguments as :class:`MuscleHandEnv`'s (official horizon: 200 steps).
 
     Observation (86, float32): hand joint angles (23), ball 1 position (3) and velocity
     times dt (3), ball 2 likewise, target 1 and 2 positions (3 each), target minus ball

@@ -37,11 +37,7 @@ from myo_sds.envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
 class DieEnv(MuscleHandEnv):
     """Turn a die in the palm of the 39-muscle MyoHand to a goal position and orientation.
 
-    Args:
-        preset: ``"p1"`` or ``"p2"``, the official phase's task distribution.
-        render_mode: ``None`` or ``"rgb_array"``.
-        horizon: control steps before truncation (official: 150).
-        **knobs: overrides of the preset; see :data:`KNOB_HELP`.
+    Constructor arguments as :class:`MuscleHandEnv`'s (official horizon: 150 steps).
 
     Observation (102, float32): hand joint angles but the last (22), hand joint velocities
     times dt (23), die position, goal position, position error, die Euler angles, goal Euler

@@ -41,7 +41,14 @@ def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Rend
 class MuscleHandEnv(gym.Env):
     """Base of the MyoHand tasks. Subclasses set the class constants and implement
     :meth:`sample_task`, :meth:`_start_episode`,
-    :meth:`_observe` and :meth:`_reward_terms` (which must include ``solved`` and ``done``)."""
+    :meth:`_observe` and :meth:`_reward_terms` (which must include ``solved`` and ``done``).
+
+    Args:
+        preset: ``"p1"`` or ``"p2"``, the official phase's task distribution.
+        render_mode: ``None`` or ``"rgb_array"``.
+        horizon: control steps before truncation (default: the task's official horizon).
+        **knobs: overrides of the preset; see the task module's ``KNOB_HELP``.
+    """
 
     MODEL_FILE: ClassVar[str]
     FRAME_SKIP: ClassVar[int]

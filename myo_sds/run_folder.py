@@ -194,8 +194,27 @@ def package_versions() -> dict[str, str]:
     return versions
 
 
+class _InRun:
+    """A file or folder of the run by name: ``RunFolder(p).config_file`` is ``p / "config.yaml"``."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __get__(self, folder: "RunFolder | None", owner: type | None = None):
+        return self if folder is None else folder.path / self.name
+
+
 class RunFolder:
     """A run folder on disk (see the module docstring for its layout)."""
+
+    config_file = _InRun(CONFIG_FILE)
+    curriculum_file = _InRun(CURRICULUM_FILE)
+    state_file = _InRun(STATE_FILE)
+    episodes_file = _InRun(EPISODES_FILE)
+    checkpoint_dir = _InRun(CHECKPOINT_DIR)
+    final_model = _InRun(FINAL_MODEL)
+    final_vecnormalize = _InRun(FINAL_VECNORMALIZE)
+    tensorboard_dir = _InRun("tb")
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
@@ -233,22 +252,6 @@ class RunFolder:
         """The command line and the package versions."""
         return self.path / "command.txt", self.path / "versions.json"
 
-    @property
-    def config_file(self) -> Path:
-        return self.path / CONFIG_FILE
-
-    @property
-    def curriculum_file(self) -> Path:
-        return self.path / CURRICULUM_FILE
-
-    @property
-    def tensorboard_dir(self) -> Path:
-        return self.path / "tb"
-
-    @property
-    def checkpoint_dir(self) -> Path:
-        return self.path / CHECKPOINT_DIR
-
     def looks_like_run(self) -> bool:
         return self.config_file.is_file() and self.checkpoint_dir.is_dir()
 
@@ -265,7 +268,7 @@ class RunFolder:
 
     def read_state(self) -> CurriculumState | None:
         """The state of the latest checkpoint, None before the first one."""
-        path = self.path / STATE_FILE
+        path = self.state_file
         return CurriculumState.from_json(path.read_text()) if path.is_file() else None
 
     # checkpoints -----------------------------------------------------------------------
@@ -303,29 +306,17 @@ class RunFolder:
         _atomic_save(files.random_state, lambda tmp: tmp.write_bytes(pickle.dumps(random_state)))
         atomic_write_text(files.state, state.to_json())
         atomic_write_text(self.checkpoint_dir / LATEST_FILE, json.dumps({"steps": state.num_timesteps}))
-        atomic_write_text(self.path / STATE_FILE, state.to_json())
+        atomic_write_text(self.state_file, state.to_json())
         for old in self.checkpoint_steps()[:-keep]:
             for path in self.checkpoint(old):
                 path.unlink(missing_ok=True)
         return files
-
-    @property
-    def final_model(self) -> Path:
-        return self.path / FINAL_MODEL
-
-    @property
-    def final_vecnormalize(self) -> Path:
-        return self.path / FINAL_VECNORMALIZE
 
     def save_final(self, model, venv) -> None:
         _atomic_save(self.final_model, model.save)
         _atomic_save(self.final_vecnormalize, lambda tmp: venv.save(str(tmp)))
 
     # episodes --------------------------------------------------------------------------
-
-    @property
-    def episodes_file(self) -> Path:
-        return self.path / EPISODES_FILE
 
     def append_episodes(self, records: Iterable[EpisodeRecord]) -> None:
         """Add rows to ``episodes.csv``; a run begun before the last columns existed keeps its
