@@ -24,7 +24,8 @@ class Decision(enum.Enum):
 
 
 def episode_metric(metric: str, result: EpisodeResult) -> float:
-    """The value one episode contributes to an advancement metric."""
+    """The value one episode contributes to an advancement metric (``result``: anything with
+    the episode's official ``score`` and ``dropped``, e.g. a logged episode row)."""
     if metric == "score":
         return result.score
     if metric == "survival":

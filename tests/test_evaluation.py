@@ -173,3 +173,21 @@ def test_die_checkpoint_scores_the_same_on_our_env_and_official(tmp_path):
         [(e.solved_steps, e.length, e.dropped) for e in official.episodes]
     summary = ours.summary()
     assert summary["score"] == np.mean([e["solved_steps"] > 5 for e in summary["per_episode"]])
+
+
+def test_run_summary_gives_each_stage_its_steps_time_and_measured_value(tiny_run, tmp_path, capsys):
+    from myo_sds.cli.train import main
+
+    summary = ev.summarize(tiny_run.path)
+    first, second = summary.stages
+    transition = tiny_run.state.history[0]
+    assert (first.status, first.env_steps, first.episodes) == ("passed", transition.stage_steps, transition.stage_episodes)
+    assert first.measured == transition.measured >= first.threshold
+    assert second.status == "budget_reached" and second.env_steps == 2048 - transition.at_step
+    assert first.wall_s + second.wall_s <= summary.wall_s
+    # The trend ends at the stage's current measured value: the same window of episodes.
+    assert second.trend[-1][1] == pytest.approx(second.measured) and len(second.trend) == 5
+    assert main(["--status", str(tiny_run.path), "--json", str(tmp_path / "s.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "1 easy  passed" in printed and f"score {second.measured:.3f} / 0.9" in printed
+    assert json.loads((tmp_path / "s.json").read_text())["stages"][1]["trend"][-1][1] == pytest.approx(second.measured)

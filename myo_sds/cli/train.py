@@ -3,6 +3,7 @@
     python train.py --config configs/quickstart.yaml [--set ppo.learning_rate=3e-4 ...]
     myo-sds-train --config quickstart             # a bundled config, by name
     python train.py --resume runs/quickstart-20261122-101500-s0 [--max-hours 8] [--total-steps N]
+    python train.py --status runs/quickstart-20261122-101500-s0 [--json summary.json]
 """
 
 from __future__ import annotations
@@ -21,6 +22,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     source.add_argument("--config", type=Path,
                         help="run config YAML (configs/*.yaml), or the name of a bundled one (quickstart, baoding_p1, ...)")
     source.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue this run from its latest checkpoint")
+    source.add_argument("--status", type=Path, metavar="RUN_DIR",
+                        help="print the run's stage table (steps, hours, measured value against the threshold) and exit")
+    parser.add_argument("--json", type=Path, metavar="FILE", help="with --status: also write the summary as JSON")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="override a config value, e.g. --set n_envs=8 --set ppo.batch_size=256")
     parser.add_argument("--seed", type=int, help="same as --set seed=N")
@@ -44,8 +48,26 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def show_status(run_dir: Path, json_path: Path | None) -> int:
+    import json
+
+    from myo_sds.evaluation.summary import format_summary, summarize
+
+    try:
+        summary = summarize(run_dir)
+    except (ConfigError, FileNotFoundError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    print(format_summary(summary))
+    if json_path is not None:
+        json_path.write_text(json.dumps(summary.to_dict(), indent=2))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.status:
+        return show_status(args.status, args.json)
     from myo_sds.curricula.schema import load_run_config
 
     try:

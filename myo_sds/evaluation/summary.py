@@ -1,0 +1,117 @@
+"""A run at a glance, while it trains or after it ended: per stage, env steps and wall time
+spent, the measured value against the threshold, and how the current stage is trending."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from myo_sds.curricula.advancement import episode_metric
+from myo_sds.curricula.schema import load_curriculum
+from myo_sds.run_folder import EpisodeRecord, RunFolder
+
+TREND_POINTS = 5  # measured values shown across the current stage
+
+
+@dataclass
+class StageSummary:
+    index: int  # from 1, as on the console
+    name: str
+    status: str  # passed | timed_out | stop | current | not reached
+    env_steps: int
+    wall_s: float
+    episodes: int
+    metric: str | None
+    threshold: float | None
+    window: int | None
+    measured: float | None  # at the transition, or now for the current stage
+    trend: list[tuple[int, float]] = field(default_factory=list)  # (run env step, measured) in the current stage
+
+
+@dataclass
+class RunSummary:
+    run_dir: str
+    status: str
+    env_steps: int
+    wall_s: float
+    stages: list[StageSummary]
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _metric_values(records: list[EpisodeRecord], metric: str) -> np.ndarray:
+    return np.array([episode_metric(metric, r) for r in records])
+
+
+def _wall_at(records: list[EpisodeRecord], step: int, default: float) -> float:
+    walls = [r.wall_s for r in records if r.step <= step]
+    return walls[-1] if walls else default
+
+
+def summarize(run_dir: str | Path) -> RunSummary:
+    """The summary of a run folder (its latest checkpoint's state and its episode log)."""
+    folder = RunFolder(run_dir)
+    if not folder.path.is_dir():
+        raise FileNotFoundError(f"{folder.path}: no such run folder")
+    state = folder.read_state()
+    if state is None:
+        raise FileNotFoundError(f"{folder.path}: no checkpoint yet, nothing to summarize")
+    curriculum = load_curriculum(folder.curriculum_file)
+    records = [r for r in folder.read_episodes() if r.step <= state.num_timesteps]
+    starts = state.stage_starts()
+    stages = []
+    for index, stage in enumerate(curriculum.stages):
+        rule = stage.advance
+        base = StageSummary(index + 1, stage.name, "not reached", 0, 0.0, 0, rule.metric if rule else None,
+                            rule.threshold if rule else None, rule.window if rule else None, None)
+        if index < len(state.history):
+            transition = state.history[index]
+            start_wall = _wall_at(records, starts[index], 0.0)
+            base.status, base.env_steps, base.episodes = transition.decision, transition.stage_steps, transition.stage_episodes
+            base.wall_s = _wall_at(records, transition.at_step, start_wall) - start_wall
+            base.measured = None if math.isnan(transition.measured) else transition.measured
+        elif index == state.stage_index:
+            base.status = "current" if state.status.value in ("running", "interrupted", "time_limit") else state.status.value
+            base.env_steps, base.episodes = state.num_timesteps - state.stage_start_step, state.stage_episodes
+            base.wall_s = state.wall_s - _wall_at(records, state.stage_start_step, 0.0)
+            base.measured = float(np.mean(state.recent)) if state.recent else None
+            in_stage = [r for r in records if r.stage_index == index]
+            if rule is not None and in_stage:
+                values = _metric_values(in_stage, rule.metric)
+                steps = np.array([r.step for r in in_stage])
+                for mark in np.linspace(steps[0], steps[-1], TREND_POINTS):
+                    upto = values[steps <= mark][-rule.window:]
+                    if len(upto):
+                        base.trend.append((int(mark), float(upto.mean())))
+        stages.append(base)
+    return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages)
+
+
+def _steps(step: int) -> str:
+    return f"{step / 1e6:.2f}M" if step >= 1_000_000 else f"{step:,}"
+
+
+def format_summary(summary: RunSummary) -> str:
+    """The summary as a table a person reads at a glance."""
+    lines = [f"{summary.run_dir}: {summary.status}, {summary.env_steps:,} env steps, "
+             f"{summary.wall_s / 3600:.2f} h of training"]
+    header = ("stage", "status", "env steps", "hours", "episodes", "measured / threshold")
+    rows = []
+    for s in summary.stages:
+        target = (f"{s.metric} {'-' if s.measured is None else f'{s.measured:.3f}'} / {s.threshold}"
+                  if s.metric else "no advancement rule")
+        rows.append((f"{s.index} {s.name}", s.status, f"{s.env_steps:,}", f"{s.wall_s / 3600:.2f}", f"{s.episodes:,}",
+                     target))
+    widths = [max(len(str(r[i])) for r in (header, *rows)) for i in range(len(header))]
+    for row in (header, *rows):
+        lines.append("  ".join(str(v).ljust(w) for v, w in zip(row, widths)).rstrip())
+    current = [s for s in summary.stages if s.trend]
+    for s in current:
+        points = ", ".join(f"{value:.3f} at {_steps(step)}" for step, value in s.trend)
+        lines.append(f"stage {s.index} trend ({s.metric} over the last {s.window} episodes): {points}")
+    return "\n".join(lines)
