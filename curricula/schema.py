@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
 
 
@@ -79,20 +80,13 @@ class PpoOverrides:
         return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
 
 
-DEFAULT_PRESET = "p1"
-
-
 @dataclass(frozen=True)
 class Stage:
     name: str
-    env: Mapping[str, Any]  # the knobs the curriculum sets (defaults merged in), validated
+    env: Mapping[str, Any]  # the knobs as the curriculum writes them (defaults merged in)
+    distribution: TaskKnobs  # the same, checked and read once: what every env of the stage gets
     advance: AdvanceRule | None  # None: train on this stage until the step budget ends
     ppo: PpoOverrides = PpoOverrides()
-
-    @property
-    def knobs(self) -> dict[str, Any]:
-        """The complete knobs the stage sends to every env: the preset is always explicit."""
-        return {"preset": DEFAULT_PRESET, **self.env}
 
 
 @dataclass(frozen=True)
@@ -361,16 +355,15 @@ def _advance_rule(reader: _Reader, key: str, raw: Any) -> AdvanceRule | None:
     return rule
 
 
-def _stage_env(reader: _Reader, key: str, task: str, knobs: Mapping[str, Any]) -> dict[str, Any]:
-    """Check a stage's merged knobs against the task's env; return them as given."""
+def _stage_distribution(reader: _Reader, key: str, task: str, knobs: Mapping[str, Any]) -> TaskKnobs:
+    """A stage's merged knobs, checked against the task's declarations and read."""
     spec = TASK_SPECS[task]
     knobs = dict(knobs)
-    reader.mapping(key, knobs, ("preset", *spec.knob_help))
+    reader.mapping(key, knobs, ("preset", *spec.knobs.help()))
     try:
-        spec.parse_knobs(**knobs)
+        return spec.knobs.parse(**knobs)
     except ValueError as error:
         raise reader.error(key, str(error)) from None
-    return knobs
 
 
 def stage_label(index: int, name: str | None = None) -> str:
@@ -391,7 +384,7 @@ def load_curriculum(path: str | Path) -> Curriculum:
         raise reader.error("", "the curriculum file is empty")
     task = reader.choice("task", raw.get("task", "baoding"), tuple(TASK_SPECS))
     name = reader.string("name", raw.get("name", path.stem))
-    defaults = reader.mapping("defaults", raw.get("defaults"), ("preset", *TASK_SPECS[task].knob_help))
+    defaults = reader.mapping("defaults", raw.get("defaults"), ("preset", *TASK_SPECS[task].knobs.help()))
     stages_raw = raw.get("stages")
     if not isinstance(stages_raw, list) or not stages_raw:
         raise reader.error("stages", "expected a non-empty list of stages")
@@ -404,11 +397,12 @@ def load_curriculum(path: str | Path) -> Curriculum:
             raise reader.error(f"{key} name", f"duplicate stage name {stage_name!r}")
         seen.add(stage_name)
         key = stage_label(index, stage_name)
-        overrides = reader.mapping(f"{key} env", stage_raw.get("env"), ("preset", *TASK_SPECS[task].knob_help))
-        env = _stage_env(reader, f"{key} env", task, {**defaults, **overrides})
+        overrides = reader.mapping(f"{key} env", stage_raw.get("env"), ("preset", *TASK_SPECS[task].knobs.help()))
+        env = {**defaults, **overrides}
+        distribution = _stage_distribution(reader, f"{key} env", task, env)
         advance = _advance_rule(reader, f"{key} advance", stage_raw.get("advance"))
         ppo = _dataclass_from(reader, f"{key} ppo", stage_raw.get("ppo"), PpoOverrides)
-        stages.append(Stage(stage_name, env, advance, ppo))
+        stages.append(Stage(stage_name, env, distribution, advance, ppo))
     return Curriculum(name=name, task=task, stages=tuple(stages), path=path)
 
 

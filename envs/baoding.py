@@ -29,7 +29,6 @@ from myo_sds.envs.baoding_task import (  # noqa: F401  (re-exported: the env's p
     DIRECTIONS,
     FRAME_SKIP,
     HORIZON,
-    KNOB_HELP,
     MODEL_FILE,
     N_HAND_JOINTS,
     N_WRIST_JOINTS,
@@ -37,13 +36,12 @@ from myo_sds.envs.baoding_task import (  # noqa: F401  (re-exported: the env's p
     OFFICIAL_START_ANGLE,
     ON_BALLS_START_ANGLE,
     ORBIT_CENTER,
-    PRESETS,
     REWARD_TERMS,
     BaodingKnobs,
     BaodingTask,
-    parse_knobs,
 )
 from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
+from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs
 
 
 class BaodingEnv(MuscleHandEnv):
@@ -63,14 +61,13 @@ class BaodingEnv(MuscleHandEnv):
     OBS_SIZE = 86
     TASK_NAME = "baoding"
     TASK_CLASS = BaodingTask
-    KNOBS = KNOB_HELP
+    KNOBS_CLASS = BaodingKnobs
     REWARD_TERMS = REWARD_TERMS
     metadata = {"render_modes": ["rgb_array"], "render_fps": 40}
-    validate_knobs = staticmethod(parse_knobs)
 
-    def __init__(self, preset: str = "p1", render_mode: str | None = None,
-                 horizon: int = HORIZON, **knobs: Any) -> None:
-        super().__init__(preset, render_mode, horizon, **knobs)
+    def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, horizon: int = HORIZON, *,
+                 distribution: TaskKnobs | None = None, **knobs: Any) -> None:
+        super().__init__(preset, render_mode, horizon, distribution=distribution, **knobs)
         model = self.model
         self._ball_bodies = (model.body("ball1").id, model.body("ball2").id)
         self._ball_geoms = (model.geom("ball1").id, model.geom("ball2").id)

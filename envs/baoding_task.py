@@ -7,20 +7,25 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from dataclasses import asdict, dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 from myo_sds.envs.knobs import (
     Range,
+    TaskKnobs,
     check_complete,
-    merge_preset,
+    choice,
+    knob,
+    optional,
     parse_choice,
     parse_probability,
     parse_range,
     parse_vector_range,
-    parse_weights,
+    ranged,
+    scalar,
     to_float,
+    weights,
 )
 
 MODEL_FILE = "myohand_baoding.xml"
@@ -88,105 +93,69 @@ class BaodingTask:
         return values
 
 
+def _period(name: str, value: Any) -> Range | None:
+    return None if value == "static" else parse_range(name, value, positive=True)
+
+
+def _start_angle(name: str, value: Any) -> str | float:
+    return value if value in ("fixed", "on_balls", "uniform") else to_float(
+        f"{name} (or one of fixed, on_balls, uniform)", value)
+
+
+def _friction(name: str, value: Any) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    low, high = parse_vector_range(name, value, 3)
+    if np.any(low < 0):
+        raise ValueError(f"{name}: coefficients must be >= 0, got {low.tolist()}")
+    return tuple(low.tolist()), tuple(high.tolist())
+
+
 @dataclass(frozen=True)
-class BaodingKnobs:
-    """The task distribution and episode rules; see :data:`KNOB_HELP` for each field."""
+class BaodingKnobs(TaskKnobs):
+    """The task distribution and episode rules, each knob declared once."""
 
-    direction: str = "ccw"
-    period: Range | None = Range(5.0, 5.0)  # None: static targets
-    x_radius: Range = Range(0.025, 0.025)
-    y_radius: Range = Range(0.028, 0.028)
-    start_angle: str | float = "fixed"
-    start_offset: Range | None = None
-    rsi_probability: float = 0.0
-    ball_size: Range | None = None
-    ball_mass: Range | None = None
-    ball_friction: tuple[tuple[float, ...], tuple[float, ...]] | None = None
-    finger_noise: float = 0.0
-    palm_noise: float = 0.0
-    drop_height: float = 1.25
-    solved_radius: float = 0.015
-    reward_weights: Mapping[str, float] = field(
-        default_factory=lambda: {"pos_dist_1": 5.0, "pos_dist_2": 5.0})
+    KIND: ClassVar[str] = "Baoding knob"
+    PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
+        "p1": {},
+        "p2": {
+            "direction": "random",
+            "period": [4.0, 6.0],
+            "x_radius": [0.020, 0.030],
+            "y_radius": [0.022, 0.032],
+            "start_angle": "uniform",
+            "ball_size": [0.018, 0.024],
+            "ball_mass": [0.030, 0.300],
+            "ball_friction": [[n - c for n, c in zip(NOMINAL_FRICTION, (0.2, 0.001, 0.00002))],
+                              [n + c for n, c in zip(NOMINAL_FRICTION, (0.2, 0.001, 0.00002))]],
+        },
+    }
 
+    direction: str = knob("ccw", parse=choice(*DIRECTIONS, "random"),
+                          help="hold | cw | ccw | random (uniform over the three, as in P2)")
+    period: Range | None = knob(Range(5.0, 5.0), parse=_period,  # None: static targets
+                                help="seconds per revolution of the targets: a value, [min, max], or 'static'")
+    x_radius: Range = knob(Range(0.025, 0.025), parse=ranged(positive=True),
+                           help="m, ellipse half-axis along the palm's x: a value or [min, max]")
+    y_radius: Range = knob(Range(0.028, 0.028), parse=ranged(positive=True),
+                           help="m, ellipse half-axis along the palm's y: a value or [min, max]")
+    start_angle: str | float = knob("fixed", parse=_start_angle,
+                                    help="'fixed' (official pi/4), 'on_balls' (3pi/4), 'uniform', or radians")
+    start_offset: Range | None = knob(None, parse=optional(ranged()),
+                                      help="rad added to the start angle: a value or [min, max]")
+    rsi_probability: float = knob(0.0, parse=parse_probability,
+                                  help="probability the balls start exactly on their targets (RSI)")
+    ball_size: Range | None = knob(None, parse=optional(ranged(positive=True)),
+                                   help="m, ball radius: null (model's 0.022), a value, or [min, max]")
+    ball_mass: Range | None = knob(None, parse=optional(ranged(positive=True)),
+                                   help="kg: null (model's 0.043), a value, or [min, max]")
+    ball_friction: tuple[tuple[float, ...], tuple[float, ...]] | None = knob(
+        None, parse=optional(_friction), help="null (model's), [slide, torsion, roll], or [[3 lows], [3 highs]]")
+    finger_noise: float = knob(0.0, parse=scalar(minimum=0.0),
+                               help="rad, uniform +- noise on the 20 finger joints at reset")
+    palm_noise: float = knob(0.0, parse=scalar(minimum=0.0), help="rad, uniform +- noise on the 3 wrist joints at reset")
+    drop_height: float = knob(1.25, parse=to_float, help="m, a ball below this height is dropped and ends the episode")
+    solved_radius: float = knob(0.015, parse=scalar(positive=True),
+                                help="m, both balls within this distance of their targets = solved")
+    reward_weights: Mapping[str, float] = knob(
+        default_factory=lambda: {"pos_dist_1": 5.0, "pos_dist_2": 5.0}, parse=weights(REWARD_TERMS),
+        help=f"mapping term -> weight over {', '.join(REWARD_TERMS)}")
 
-KNOB_HELP = {
-    "direction": "hold | cw | ccw | random (uniform over the three, as in P2)",
-    "period": "seconds per revolution of the targets: a value, [min, max], or 'static'",
-    "x_radius": "m, ellipse half-axis along the palm's x: a value or [min, max]",
-    "y_radius": "m, ellipse half-axis along the palm's y: a value or [min, max]",
-    "start_angle": "'fixed' (official pi/4), 'on_balls' (3pi/4), 'uniform', or radians",
-    "start_offset": "rad added to the start angle: a value or [min, max]",
-    "rsi_probability": "probability the balls start exactly on their targets (RSI)",
-    "ball_size": "m, ball radius: null (model's 0.022), a value, or [min, max]",
-    "ball_mass": "kg: null (model's 0.043), a value, or [min, max]",
-    "ball_friction": "null (model's), [slide, torsion, roll], or [[3 lows], [3 highs]]",
-    "finger_noise": "rad, uniform +- noise on the 20 finger joints at reset",
-    "palm_noise": "rad, uniform +- noise on the 3 wrist joints at reset",
-    "drop_height": "m, a ball below this height is dropped and ends the episode",
-    "solved_radius": "m, both balls within this distance of their targets = solved",
-    "reward_weights": f"mapping term -> weight over {', '.join(REWARD_TERMS)}",
-}
-
-PRESETS: dict[str, dict[str, Any]] = {
-    "p1": {},
-    "p2": {
-        "direction": "random",
-        "period": [4.0, 6.0],
-        "x_radius": [0.020, 0.030],
-        "y_radius": [0.022, 0.032],
-        "start_angle": "uniform",
-        "ball_size": [0.018, 0.024],
-        "ball_mass": [0.030, 0.300],
-        "ball_friction": [[n - c for n, c in zip(NOMINAL_FRICTION, (0.2, 0.001, 0.00002))],
-                          [n + c for n, c in zip(NOMINAL_FRICTION, (0.2, 0.001, 0.00002))]],
-    },
-}
-
-
-def parse_knobs(preset: str = "p1", **knobs: Any) -> BaodingKnobs:
-    """Validated knobs: a preset's values with ``knobs`` overriding them.
-
-    Raises:
-        ValueError: naming an unknown preset or knob (with the allowed ones), or a bad value.
-    """
-    raw = merge_preset("Baoding knob", preset, PRESETS, knobs, KNOB_HELP)
-    out: dict[str, Any] = {}
-    optional_range = lambda key, **kw: None if raw[key] is None else parse_range(key, raw[key], **kw)  # noqa: E731
-    if "direction" in raw:
-        out["direction"] = parse_choice("direction", raw["direction"], (*DIRECTIONS, "random"))
-    if "period" in raw:
-        out["period"] = None if raw["period"] == "static" else parse_range(
-            "period", raw["period"], positive=True)
-    for key in ("x_radius", "y_radius"):
-        if key in raw:
-            out[key] = parse_range(key, raw[key], positive=True)
-    if "start_angle" in raw:
-        angle = raw["start_angle"]
-        out["start_angle"] = angle if angle in ("fixed", "on_balls", "uniform") else to_float(
-            "start_angle (or one of fixed, on_balls, uniform)", angle)
-    if "start_offset" in raw:
-        out["start_offset"] = optional_range("start_offset")
-    if "rsi_probability" in raw:
-        out["rsi_probability"] = parse_probability("rsi_probability", raw["rsi_probability"])
-    for key in ("ball_size", "ball_mass"):
-        if key in raw:
-            out[key] = optional_range(key, positive=True)
-    if "ball_friction" in raw:
-        if raw["ball_friction"] is None:
-            out["ball_friction"] = None
-        else:
-            low, high = parse_vector_range("ball_friction", raw["ball_friction"], 3)
-            if np.any(low < 0):
-                raise ValueError(f"ball_friction: coefficients must be >= 0, got {low.tolist()}")
-            out["ball_friction"] = (tuple(low.tolist()), tuple(high.tolist()))
-    for key in ("finger_noise", "palm_noise"):
-        if key in raw:
-            out[key] = parse_range(key, raw[key], minimum=0.0).low
-    if "drop_height" in raw:
-        out["drop_height"] = to_float("drop_height", raw["drop_height"])
-    if "solved_radius" in raw:
-        out["solved_radius"] = parse_range("solved_radius", raw["solved_radius"], positive=True).low
-    if "reward_weights" in raw:
-        out["reward_weights"] = parse_weights("reward_weights", raw["reward_weights"], REWARD_TERMS)
-    return replace(BaodingKnobs(), **out)

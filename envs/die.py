@@ -21,16 +21,14 @@ import numpy as np
 from myo_sds.envs.die_task import (  # noqa: F401  (re-exported: the env's public names)
     FRAME_SKIP,
     HORIZON,
-    KNOB_HELP,
     MODEL_FILE,
     N_HAND_JOINTS,
-    PRESETS,
     REWARD_TERMS,
     DieKnobs,
     DieTask,
-    parse_knobs,
 )
 from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
+from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs
 from myo_sds.envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
 
 
@@ -50,15 +48,14 @@ class DieEnv(MuscleHandEnv):
     OBS_SIZE = 102
     TASK_NAME = "die"
     TASK_CLASS = DieTask
-    KNOBS = KNOB_HELP
+    KNOBS_CLASS = DieKnobs
     REWARD_TERMS = REWARD_TERMS
     ACTION_DTYPE = np.float64
     metadata = {"render_modes": ["rgb_array"], "render_fps": 100}
-    validate_knobs = staticmethod(parse_knobs)
 
-    def __init__(self, preset: str = "p1", render_mode: str | None = None,
-                 horizon: int = HORIZON, **knobs: Any) -> None:
-        super().__init__(preset, render_mode, horizon, **knobs)
+    def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, horizon: int = HORIZON, *,
+                 distribution: TaskKnobs | None = None, **knobs: Any) -> None:
+        super().__init__(preset, render_mode, horizon, distribution=distribution, **knobs)
         model, data = self.model, self.data
         self._object_site, self._goal_site = model.site("object_o").id, model.site("target_o").id
         self._goal_body, self._object_body = model.body("target").id, model.body("Object").id

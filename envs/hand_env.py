@@ -15,7 +15,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 from myo_sds.envs.assets import load_hand_model
-from myo_sds.envs.knobs import check_known
+from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs, check_known
 from myo_sds.envs.metrics import EpisodeResult
 
 _INSTABILITY_WARNINGS = np.array([mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
@@ -47,7 +47,9 @@ class MuscleHandEnv(gym.Env):
         preset: ``"p1"`` or ``"p2"``, the official phase's task distribution.
         render_mode: ``None`` or ``"rgb_array"``.
         horizon: control steps before truncation (default: the task's official horizon).
-        **knobs: overrides of the preset; see the task module's ``KNOB_HELP``.
+        distribution: knobs already read (a curriculum stage's); then ``preset`` and ``knobs``
+            must not be given.
+        **knobs: overrides of the preset; see the task's knob dataclass.
     """
 
     MODEL_FILE: ClassVar[str]
@@ -56,21 +58,21 @@ class MuscleHandEnv(gym.Env):
     OBS_SIZE: ClassVar[int]
     TASK_NAME: ClassVar[str]
     TASK_CLASS: ClassVar[type]  # the task-instance dataclass, with ``from_mapping``
-    KNOBS: ClassVar[Mapping[str, str]]
+    KNOBS_CLASS: ClassVar[type[TaskKnobs]]
     REWARD_TERMS: ClassVar[tuple[str, ...]]
     # myosuite's Baoding env maps actions in float32, its die env in float64: keep each one's.
     ACTION_DTYPE: ClassVar[type | None] = None
     metadata = {"render_modes": ["rgb_array"]}
 
-    def __init__(self, preset: str = "p1", render_mode: str | None = None,
-                 horizon: int | None = None, **knobs: Any) -> None:
+    def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None,
+                 horizon: int | None = None, *, distribution: TaskKnobs | None = None, **knobs: Any) -> None:
         super().__init__()
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode: {render_mode!r} is not one of None, 'rgb_array'")
         self.render_mode = render_mode
         self.horizon = int(horizon or self.HORIZON)
-        self.knobs = self.validate_knobs(preset, **knobs)
         self.preset = preset
+        self.knobs = self._distribution(preset, distribution, knobs)
         self.model, self._spec = load_hand_model(self.MODEL_FILE)
         self.data = mujoco.MjData(self.model)
         self._scratch = mujoco.MjData(self.model)  # for mj_setConst after geometry edits
@@ -84,9 +86,14 @@ class MuscleHandEnv(gym.Env):
 
     # -- to implement ---------------------------------------------------------------------
 
-    @staticmethod
-    def validate_knobs(preset: str = "p1", **knobs: Any) -> Any:
-        raise NotImplementedError
+    @classmethod
+    def _distribution(cls, preset: str, distribution: TaskKnobs | None, knobs: Mapping[str, Any]) -> TaskKnobs:
+        if distribution is None:
+            return cls.KNOBS_CLASS.parse(preset, **knobs)
+        if knobs or not isinstance(distribution, cls.KNOBS_CLASS):
+            raise ValueError(f"distribution: expected {cls.KNOBS_CLASS.__name__} and no other knobs, got "
+                             f"{type(distribution).__name__}" + (f" and {', '.join(knobs)}" if knobs else ""))
+        return distribution
 
     def sample_task(self, rng: np.random.Generator) -> Any:
         raise NotImplementedError
@@ -118,14 +125,15 @@ class MuscleHandEnv(gym.Env):
 
     # -- distribution -------------------------------------------------------------------
 
-    def configure(self, preset: str | None = None, **knobs: Any) -> None:
-        """Replace the task distribution (takes effect at the next reset).
+    def configure(self, preset: str | None = None, *, distribution: TaskKnobs | None = None, **knobs: Any) -> None:
+        """Replace the task distribution (takes effect at the next reset): ``distribution``
+        (knobs already read), or the preset (default the current one) with ``knobs`` over it.
 
-        The result depends only on the arguments (the preset, default the current one,
-        with ``knobs`` over it), so a curriculum can re-send a stage after a restart.
+        The result depends only on the arguments, so a curriculum can re-send a stage after a
+        restart.
         """
         preset = self.preset if preset is None else preset
-        self.knobs = self.validate_knobs(preset, **knobs)
+        self.knobs = self._distribution(preset, distribution, knobs)
         self.preset = preset
 
     # -- gymnasium API ------------------------------------------------------------------

@@ -8,9 +8,9 @@ string; numbers given as strings are accepted when they parse as floats.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -146,3 +146,63 @@ def parse_weights(name: str, weights: Mapping[str, Any], terms: Iterable[str]) -
         raise ValueError(f"{name}: expected a mapping of term -> weight, got {weights!r}")
     check_known(f"reward term in {name}", weights, terms)
     return {term: to_float(f"{name}.{term}", weight) for term, weight in weights.items()}
+
+
+# -- declaring a task's knobs --------------------------------------------------------------
+
+DEFAULT_PRESET = "p1"
+Parser = Callable[[str, Any], Any]  # (knob name, value as written) -> typed value, or ValueError
+
+
+def knob(default: Any = MISSING, *, parse: Parser, help: str, default_factory: Callable[[], Any] | Any = MISSING):
+    """A task knob, declared once as a field of a :class:`TaskKnobs` dataclass: its type (the
+    annotation), its default (typed), how a written value is checked and read, what it means."""
+    return field(default=default, default_factory=default_factory, metadata={"parse": parse, "help": help})
+
+
+class TaskKnobs:
+    """Base of a task's knob dataclass (``@dataclass(frozen=True)`` subclasses whose fields are
+    :func:`knob` declarations). ``parse`` turns a preset and written values into an instance."""
+
+    KIND: ClassVar[str]  # "Baoding knob", in error messages
+    PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]]  # preset name -> written values
+
+    @classmethod
+    def help(cls) -> dict[str, str]:
+        """Each knob's name and meaning, in declaration order."""
+        return {f.name: f.metadata["help"] for f in fields(cls)}
+
+    @classmethod
+    def parse(cls, preset: str = DEFAULT_PRESET, **written: Any):
+        """The knobs of ``preset`` with ``written`` values over them, each checked.
+
+        Raises:
+            ValueError: naming an unknown preset or knob (with the allowed ones), or a bad value.
+        """
+        merged = merge_preset(cls.KIND, preset, cls.PRESETS, written, cls.help())
+        parsers = {f.name: f.metadata["parse"] for f in fields(cls)}
+        return cls(**{name: parsers[name](name, value) for name, value in merged.items()})
+
+
+def ranged(*, positive: bool = False, minimum: float | None = None) -> Parser:
+    """A :class:`Range` knob (a value or ``[low, high]``)."""
+    return lambda name, value: parse_range(name, value, positive=positive, minimum=minimum)
+
+
+def scalar(*, positive: bool = False, minimum: float | None = None) -> Parser:
+    """A single number, with the same checks as a range."""
+    return lambda name, value: parse_range(name, value, positive=positive, minimum=minimum).low
+
+
+def optional(parse: Parser) -> Parser:
+    """``null`` (None: the model's own value) or what ``parse`` reads."""
+    return lambda name, value: None if value is None else parse(name, value)
+
+
+def choice(*allowed: str) -> Parser:
+    return lambda name, value: parse_choice(name, value, allowed)
+
+
+def weights(terms: Iterable[str]) -> Parser:
+    terms = tuple(terms)
+    return lambda name, value: parse_weights(name, value, terms)

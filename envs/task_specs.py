@@ -7,11 +7,10 @@ Config validation reads these, so a bad curriculum is reported before MuJoCo and
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from myo_sds.envs import baoding_task, die_task
+from myo_sds.envs.knobs import TaskKnobs
 
 
 @dataclass(frozen=True)
@@ -19,14 +18,13 @@ class TaskSpec:
     """What a curriculum needs to know of a task.
 
     Attributes:
-        knob_help: each knob's name and meaning (the keys are the allowed knobs).
-        parse_knobs: ``parse_knobs(preset="p1", **knobs)``: validated knobs, or ``ValueError``.
+        knobs: the task's knob dataclass: ``knobs.help()`` names and explains each knob,
+            ``knobs.parse(preset, **written)`` checks and reads them.
         reward_terms: names of the reward terms the env reports in ``info``.
         env_path: ``"module:Class"`` of the env.
     """
 
-    knob_help: Mapping[str, str]
-    parse_knobs: Callable[..., Any]
+    knobs: type[TaskKnobs]
     reward_terms: tuple[str, ...]
     env_path: str
 
@@ -36,7 +34,6 @@ class TaskSpec:
 
 
 TASK_SPECS: dict[str, TaskSpec] = {
-    "baoding": TaskSpec(baoding_task.KNOB_HELP, baoding_task.parse_knobs, baoding_task.REWARD_TERMS,
-                        "myo_sds.envs.baoding:BaodingEnv"),
-    "die": TaskSpec(die_task.KNOB_HELP, die_task.parse_knobs, die_task.REWARD_TERMS, "myo_sds.envs.die:DieEnv"),
+    "baoding": TaskSpec(baoding_task.BaodingKnobs, baoding_task.REWARD_TERMS, "myo_sds.envs.baoding:BaodingEnv"),
+    "die": TaskSpec(die_task.DieKnobs, die_task.REWARD_TERMS, "myo_sds.envs.die:DieEnv"),
 }

@@ -12,8 +12,8 @@ from myo_sds.envs.baoding import (
     OFFICIAL_START_ANGLE,
     ORBIT_CENTER,
     BaodingEnv,
+    BaodingKnobs,
     BaodingTask,
-    parse_knobs,
 )
 
 
@@ -177,14 +177,14 @@ def test_truncates_at_horizon():
 
 
 def test_presets_equal_official_ranges():
-    p1 = parse_knobs("p1")
+    p1 = BaodingKnobs.parse("p1")
     assert p1.direction == "ccw" and (p1.period.low, p1.period.high) == (5.0, 5.0)
     assert (p1.x_radius.low, p1.y_radius.low) == (0.025, 0.028)
     assert p1.start_angle == "fixed" and OFFICIAL_START_ANGLE == pytest.approx(math.pi / 4)
     assert p1.ball_size is None and p1.ball_mass is None and p1.ball_friction is None
     assert p1.drop_height == 1.25 and p1.solved_radius == 0.015
     assert dict(p1.reward_weights) == {"pos_dist_1": 5.0, "pos_dist_2": 5.0}
-    p2 = parse_knobs("p2")
+    p2 = BaodingKnobs.parse("p2")
     assert p2.direction == "random" and p2.start_angle == "uniform"
     assert (p2.period.low, p2.period.high) == (4.0, 6.0)
     assert (p2.x_radius.low, p2.x_radius.high) == (0.020, 0.030)
@@ -234,7 +234,7 @@ def test_unknown_preset_lists_allowed():
 
 
 def test_numeric_strings_from_yaml_are_accepted():
-    knobs = parse_knobs("p1", solved_radius="1.5e-2", period=["4e0", "6"])
+    knobs = BaodingKnobs.parse("p1", solved_radius="1.5e-2", period=["4e0", "6"])
     assert knobs.solved_radius == 0.015 and knobs.period.high == 6.0
 
 
@@ -307,3 +307,17 @@ def test_ball_physics_edits_match_a_recompiled_model():
                                    rtol=1e-9, atol=1e-12, err_msg=field)
     # mj_setConst keeps stat.meaninertia, as in the official env (checked by the parity tests).
     del mujoco
+
+
+def test_an_env_takes_knobs_already_read_and_nothing_else_with_them():
+    from myo_sds.envs.die_task import DieKnobs
+
+    hold = BaodingKnobs.parse("p1", direction="hold", period="static")
+    env = BaodingEnv(distribution=hold)
+    assert env.knobs is hold
+    env.configure(distribution=BaodingKnobs.parse("p2"))
+    assert env.knobs.direction == "random"
+    with pytest.raises(ValueError, match="expected BaodingKnobs and no other knobs, got DieKnobs"):
+        BaodingEnv(distribution=DieKnobs.parse())
+    with pytest.raises(ValueError, match="got BaodingKnobs and direction"):
+        env.configure(distribution=hold, direction="cw")

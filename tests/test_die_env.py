@@ -8,7 +8,7 @@ import mujoco
 import myo_sds.envs  # noqa: F401  (registers the ids)
 import numpy as np
 import pytest
-from myo_sds.envs.die import DieEnv, DieTask, parse_knobs
+from myo_sds.envs.die import DieEnv, DieKnobs, DieTask
 from myo_sds.envs.metrics import EpisodeResult
 from myo_sds.envs.physics import euler_to_quat, mat_to_euler
 
@@ -37,7 +37,7 @@ def test_same_seed_same_episode():
 
 
 def test_presets_equal_official_ranges():
-    p1, p2 = parse_knobs("p1"), parse_knobs("p2")
+    p1, p2 = DieKnobs.parse("p1"), DieKnobs.parse("p2")
     assert (p1.goal_position.low, p1.goal_position.high) == (-0.010, 0.010)
     assert all((r.low, r.high) == (-1.57, 1.57) for r in p1.goal_rotation)
     assert p1.size_change == 0 and (p1.mass.low, p1.mass.high) == (0.108, 0.108)

@@ -37,6 +37,7 @@ def test_two_stage_run_advances_and_records_everything(tiny_run):
     assert model.batch_size == 64 and model.learning_rate == 1e-4
     # Every worker env got the stage-2 knobs, in place.
     assert trainer.venv.get_attr("knobs")[0].direction == "ccw"
+    assert trainer.venv.get_attr("knobs") == [trainer.config.curriculum.stages[1].distribution] * 2  # read once
     for path in (folder.config_file, folder.curriculum_file, *folder.provenance_files, folder.episodes_file,
                  folder.final_model, folder.final_vecnormalize):
         assert path.is_file(), path

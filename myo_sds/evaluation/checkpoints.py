@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from myo_sds.curricula.schema import load_curriculum
+from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.run_folder import RunFolder, statistics_beside
 
@@ -41,7 +42,7 @@ class EnvChoice:
 
     task: str
     name: str  # "p1", "p2" or "stage:NAME"
-    knobs: dict[str, Any]
+    distribution: TaskKnobs  # our env's knobs (a preset's, or the stage's)
     official: bool = False
 
     @property
@@ -148,7 +149,7 @@ def choose_env(ref: CheckpointRef, name: str, official: bool = False) -> EnvChoi
     """Parse ``p1``, ``p2`` or ``stage:NAME`` (a stage of the checkpoint's own curriculum)."""
     task = run_task(ref)
     if name in ("p1", "p2"):
-        choice = EnvChoice(task, name, {"preset": name}, official)
+        choice = EnvChoice(task, name, TASK_SPECS[task].knobs.parse(name), official)
     elif name.startswith("stage:"):
         if official:
             raise EvaluationError(f"--env {name}: the official env has only the p1 and p2 tasks")
@@ -159,7 +160,7 @@ def choose_env(ref: CheckpointRef, name: str, official: bool = False) -> EnvChoi
             stage = curriculum.stages[curriculum.stage_index(name[len("stage:"):])]
         except KeyError as error:
             raise EvaluationError(f"--env {name}: {error.args[0]}") from None
-        choice = EnvChoice(task, name, stage.knobs, official)
+        choice = EnvChoice(task, name, stage.distribution, official)
     else:
         raise EvaluationError(f"--env {name!r}: expected p1, p2 or stage:NAME")
     if official and (task, name) not in OFFICIAL_IDS:

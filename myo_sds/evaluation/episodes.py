@@ -107,7 +107,8 @@ def make_env(choice: EnvChoice, render: bool = False):
         except ImportError:
             raise EvaluationError("--official needs the myosuite package: pip install myosuite==3.0.0") from None
         return gym.make(OFFICIAL_IDS[(choice.task, choice.name)])
-    return TASK_SPECS[choice.task].env_class()(render_mode="rgb_array" if render else None, **choice.knobs)
+    return TASK_SPECS[choice.task].env_class()(render_mode="rgb_array" if render else None,
+                                               distribution=choice.distribution)
 
 
 def _official_direction(env) -> str | None:

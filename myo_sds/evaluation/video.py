@@ -57,7 +57,7 @@ def record_video(ref: CheckpointRef, choice: EnvChoice, path: Path, episodes: li
     import imageio
 
     policy = load_policy(ref, choice.task)
-    env = make_env(EnvChoice(choice.task, choice.name, choice.knobs, official=False), render=True)
+    env = make_env(EnvChoice(choice.task, choice.name, choice.distribution, official=False), render=True)
     frames: list[np.ndarray] = []
     for number, (seed, caption) in enumerate(episodes, start=1):
         steps: list[tuple[np.ndarray, bool]] = []

@@ -5,22 +5,23 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any
 
 from myo_sds.curricula.schedule import PpoSettings
 from myo_sds.curricula.schema import RunConfig, Stage
+from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
 
 
-def env_factory(task: str, knobs: Mapping[str, Any], seed: int) -> Callable[[], Any]:
+def env_factory(task: str, distribution: TaskKnobs, seed: int) -> Callable[[], Any]:
     """A picklable-enough factory (for SubprocVecEnv) of one env, reset once with ``seed``."""
     def build():
         if multiprocessing.current_process().name != "MainProcess":
             # Ctrl-C goes to the whole process group: let the main process save and stop
             # the workers, instead of the workers dying mid-step.
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-        env = TASK_SPECS[task].env_class()(**knobs)
+        env = TASK_SPECS[task].env_class()(distribution=distribution)
         env.reset(seed=seed)
         return env
     return build
@@ -36,7 +37,8 @@ def build_vec_env(config: RunConfig, stage: Stage):
 
     from myo_sds.vec_env import ThreadVecEnv
 
-    factories = [env_factory(config.curriculum.task, stage.knobs, config.seed + rank) for rank in range(config.n_envs)]
+    factories = [env_factory(config.curriculum.task, stage.distribution, config.seed + rank)
+                 for rank in range(config.n_envs)]
     if config.vec_env == "subproc":
         venv = SubprocVecEnv(factories)
     elif config.vec_env == "thread":

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import random
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
+
+from myo_sds.envs.knobs import TaskKnobs
 
 
 class RolloutCollector(Protocol):
@@ -26,7 +28,7 @@ class RolloutCollector(Protocol):
         """Fill ``model.rollout_buffer`` with ``model.n_steps`` steps of every env; False when
         the callback stopped it early (nothing to train on then)."""
 
-    def set_stage(self, knobs: Mapping[str, Any]) -> None:
+    def set_stage(self, distribution: TaskKnobs) -> None:
         """Give every env the new stage's knobs before the next rollout."""
 
     def random_state(self) -> dict[str, Any]:
@@ -72,8 +74,8 @@ class LocalRollouts:
     def collect(self, model, callback) -> bool:
         return model.collect_rollouts(self.venv, callback, model.rollout_buffer, n_rollout_steps=model.n_steps)
 
-    def set_stage(self, knobs: Mapping[str, Any]) -> None:
-        self.venv.env_method("configure", **knobs)
+    def set_stage(self, distribution: TaskKnobs) -> None:
+        self.venv.env_method("configure", distribution=distribution)
 
     def random_state(self) -> dict[str, Any]:
         """Each env's generator (task draws at reset), and the global python, numpy (minibatch

@@ -329,7 +329,7 @@ class CurriculumTrainer:
         state.stage_start_step = int(model.num_timesteps)
         self.progress = StageProgress()
         self.collector.stage_index = state.stage_index
-        self.rollouts.set_stage(self.stage.knobs)
+        self.rollouts.set_stage(self.stage.distribution)
         self.apply_ppo_settings()
         self._start_stage_display()
 
