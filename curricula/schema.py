@@ -6,21 +6,15 @@ file, the key path (``stages[2].advance.threshold``), the bad value and what is 
 
 from __future__ import annotations
 
-import difflib
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import yaml
+from myo_sds.curricula.yaml_reader import ConfigError, YamlReader, load_yaml
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
-
-
-class ConfigError(ValueError):
-    """A curriculum or run config that cannot be used; the message says where and why."""
-
 
 METRICS = ("score", "survival")
 METRIC_HELP = {
@@ -193,85 +187,7 @@ ACTIVATIONS = ("relu", "tanh", "elu", "leaky_relu")
 VEC_ENVS = ("thread", "dummy", "subproc")
 
 
-# -- low-level readers -------------------------------------------------------------------
-
-class _Reader:
-    """Reads values out of one YAML file, raising errors that name the file and key path, or
-    the ``--set`` override a bad value came from."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.overrides: dict[str, str] = {}  # dotted key -> the --set assignment that set it
-
-    def error(self, key: str, message: str) -> ConfigError:
-        for dotted, assignment in self.overrides.items():
-            if key and (key == dotted or key.startswith(dotted + ".") or dotted.startswith(key + ".")):
-                return ConfigError(f"--set {assignment}: {key}: {message}")
-        where = f"{self.path}: {key}: " if key else f"{self.path}: "
-        return ConfigError(where + message)
-
-    def mapping(self, key: str, value: Any, allowed: Mapping[str, Any] | tuple[str, ...]) -> Mapping[str, Any]:
-        if value is None:
-            return {}
-        if not isinstance(value, Mapping):
-            raise self.error(key, f"expected a mapping, got {type(value).__name__} {value!r}")
-        allowed = tuple(allowed)
-        for name in value:
-            if name not in allowed:
-                near = difflib.get_close_matches(str(name), allowed, n=1)
-                hint = f" (did you mean {near[0]!r}?)" if near else ""
-                prefix = f"{key}." if key else ""
-                raise self.error(f"{prefix}{name}", f"unknown key{hint}; allowed: {', '.join(allowed)}")
-        return value
-
-    def number(self, key: str, value: Any, *, integer: bool = False, low: float | None = None,
-               high: float | None = None, strict_low: bool = False) -> float | int:
-        kind = "an integer" if integer else "a number"
-        if isinstance(value, bool):
-            raise self.error(key, f"expected {kind}, got the boolean {value!r}")
-        try:
-            number = float(value)  # PyYAML reads 3e-4 as a string
-        except (TypeError, ValueError):
-            raise self.error(key, f"expected {kind}, got {value!r}") from None
-        if not math.isfinite(number):
-            raise self.error(key, f"expected a finite number, got {value!r}")
-        if integer:
-            if number != int(number):
-                raise self.error(key, f"expected an integer, got {value!r}")
-            number = int(number)
-        if low is not None and (number <= low if strict_low else number < low):
-            raise self.error(key, f"must be {'>' if strict_low else '>='} {low}, got {value!r}")
-        if high is not None and number > high:
-            raise self.error(key, f"must be <= {high}, got {value!r}")
-        return number
-
-    def boolean(self, key: str, value: Any) -> bool:
-        if not isinstance(value, bool):
-            raise self.error(key, f"expected true or false, got {value!r}")
-        return value
-
-    def choice(self, key: str, value: Any, allowed: tuple[str, ...]) -> str:
-        if value not in allowed:
-            raise self.error(key, f"{value!r} is not one of {', '.join(allowed)}")
-        return value
-
-    def string(self, key: str, value: Any) -> str:
-        if not isinstance(value, str) or not value:
-            raise self.error(key, f"expected a non-empty string, got {value!r}")
-        return value
-
-
-def _load_yaml(path: Path, what: str) -> Any:
-    if not path.is_file():
-        raise ConfigError(f"{path}: {what} file not found")
-    try:
-        with path.open() as file:
-            return yaml.safe_load(file)
-    except yaml.YAMLError as error:
-        raise ConfigError(f"{path}: not valid YAML: {error}") from None
-
-
-def _dataclass_from(reader: _Reader, key: str, raw: Any, cls: type, defaults: Any = None) -> Any:
+def _dataclass_from(reader: YamlReader, key: str, raw: Any, cls: type, defaults: Any = None) -> Any:
     """Fill a flat dataclass of numbers/bools/strings from a mapping, checking each value."""
     base = defaults if defaults is not None else cls()
     names = tuple(f.name for f in fields(cls))
@@ -304,7 +220,7 @@ def _dataclass_from(reader: _Reader, key: str, raw: Any, cls: type, defaults: An
     return type(base)(**{**{f.name: getattr(base, f.name) for f in fields(cls)}, **values})
 
 
-def _learning_rate_decay(reader: _Reader, key: str, raw: Mapping[str, Any]) -> LearningRateDecay:
+def _learning_rate_decay(reader: YamlReader, key: str, raw: Mapping[str, Any]) -> LearningRateDecay:
     names = tuple(f.name for f in fields(LearningRateDecay))
     reader.mapping(key, raw, names)
     missing = [name for name in names if name not in raw]
@@ -316,7 +232,7 @@ def _learning_rate_decay(reader: _Reader, key: str, raw: Mapping[str, Any]) -> L
         steps=reader.number(f"{key}.steps", raw["steps"], integer=True, low=1))
 
 
-def _ppo_warmup(reader: _Reader, key: str, raw: Any) -> PpoWarmup:
+def _ppo_warmup(reader: YamlReader, key: str, raw: Any) -> PpoWarmup:
     names = tuple(f.name for f in fields(PpoWarmup))
     raw = reader.mapping(key, raw, names)
     if not raw:
@@ -330,7 +246,7 @@ def _ppo_warmup(reader: _Reader, key: str, raw: Any) -> PpoWarmup:
 
 # -- curriculum --------------------------------------------------------------------------
 
-def _advance_rule(reader: _Reader, key: str, raw: Any) -> AdvanceRule | None:
+def _advance_rule(reader: YamlReader, key: str, raw: Any) -> AdvanceRule | None:
     if raw is None:
         return None
     names = tuple(f.name for f in fields(AdvanceRule))
@@ -355,7 +271,7 @@ def _advance_rule(reader: _Reader, key: str, raw: Any) -> AdvanceRule | None:
     return rule
 
 
-def _stage_distribution(reader: _Reader, key: str, task: str, knobs: Mapping[str, Any]) -> TaskKnobs:
+def _stage_distribution(reader: YamlReader, key: str, task: str, knobs: Mapping[str, Any]) -> TaskKnobs:
     """A stage's merged knobs, checked against the task's declarations and read."""
     spec = TASK_SPECS[task]
     knobs = dict(knobs)
@@ -378,8 +294,8 @@ def load_curriculum(path: str | Path) -> Curriculum:
         ConfigError: for a missing file, bad YAML, or any bad key or value.
     """
     path = Path(path)
-    reader = _Reader(path)
-    raw = reader.mapping("", _load_yaml(path, "curriculum"), ("name", "task", "defaults", "stages"))
+    reader = YamlReader(path)
+    raw = reader.mapping("", load_yaml(path, "curriculum"), ("name", "task", "defaults", "stages"))
     if not raw:
         raise reader.error("", "the curriculum file is empty")
     task = reader.choice("task", raw.get("task", "baoding"), tuple(TASK_SPECS))
@@ -412,7 +328,7 @@ RUN_KEYS = ("curriculum", "seed", "n_envs", "vec_env", "env_threads", "device", 
             "checkpoint_every", "keep_checkpoints", "output_dir", "policy", "ppo", "normalize")
 
 
-def _set_key(reader: _Reader, raw: dict[str, Any], assignment: str) -> None:
+def _set_key(reader: YamlReader, raw: dict[str, Any], assignment: str) -> None:
     """Apply one ``a.b=value`` override (value parsed as YAML) to the raw config."""
     if "=" not in assignment:
         raise ConfigError(f"--set {assignment}: expected key=value, e.g. ppo.learning_rate=3e-4")
@@ -438,8 +354,8 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
         ConfigError: for a missing file, bad YAML, or any bad key or value.
     """
     path = Path(path)
-    reader = _Reader(path)
-    raw = dict(reader.mapping("", _load_yaml(path, "run config") or {}, RUN_KEYS))
+    reader = YamlReader(path)
+    raw = dict(reader.mapping("", load_yaml(path, "run config") or {}, RUN_KEYS))
     for assignment in overrides:
         _set_key(reader, raw, assignment)
     reader.mapping("", raw, RUN_KEYS)
