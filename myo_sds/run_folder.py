@@ -253,7 +253,28 @@ class RunFolder:
         return self.path / "command.txt", self.path / "versions.json"
 
     def looks_like_run(self) -> bool:
-        return self.config_file.is_file() and self.checkpoint_dir.is_dir()
+        """A run folder, or a model folder exported from one (:meth:`export_model`)."""
+        return self.config_file.is_file() and (self.checkpoint_dir.is_dir() or self.final_model.is_file())
+
+    def export_model(self, destination: Path, checkpoint: CheckpointFiles | None = None) -> "RunFolder":
+        """A light folder for sharing a policy: the model of ``checkpoint`` (default: the final
+        model, else the latest checkpoint) with its optimizer state, its normalization statistics
+        and curriculum state, and the run's config and curriculum; no checkpoints and no logs.
+        ``evaluate.py`` and ``train.py --status`` read it like a run folder."""
+        import shutil
+
+        if checkpoint is None and not self.final_model.is_file():
+            checkpoint = self.latest_checkpoint()
+        if checkpoint is None and not self.final_model.is_file():
+            raise FileNotFoundError(f"{self.path}: no final model and no complete checkpoint to export")
+        target = RunFolder(destination)
+        target.path.mkdir(parents=True, exist_ok=True)
+        model, stats, state = ((self.final_model, self.final_vecnormalize, self.state_file) if checkpoint is None
+                               else (checkpoint.model, checkpoint.vecnormalize, checkpoint.state))
+        for source, copy in ((model, target.final_model), (stats, target.final_vecnormalize), (state, target.state_file),
+                             (self.config_file, target.config_file), (self.curriculum_file, target.curriculum_file)):
+            shutil.copyfile(source, copy)
+        return target
 
     @classmethod
     def containing(cls, path: Path) -> "RunFolder | None":

@@ -191,3 +191,19 @@ def test_run_summary_gives_each_stage_its_steps_time_and_measured_value(tiny_run
     printed = capsys.readouterr().out
     assert "1 easy  passed" in printed and f"score {second.measured:.3f} / 0.9" in printed
     assert json.loads((tmp_path / "s.json").read_text())["stages"][1]["trend"][-1][1] == pytest.approx(second.measured)
+
+
+def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, capsys):
+    from myo_sds.cli.train import main
+
+    assert main(["--export", str(tiny_run.path), "--to", str(tmp_path / "model")]) == 0
+    assert sorted(p.name for p in (tmp_path / "model").iterdir()) == [
+        "config.yaml", "curriculum.yaml", "curriculum_state.json", "final_model.zip", "final_vecnormalize.pkl"]
+    exported, original = ev.resolve_checkpoint(tmp_path / "model"), ev.resolve_checkpoint(tiny_run.path)
+    for env_name in ("stage:hard", "p1"):
+        a = ev.evaluate(exported, ev.choose_env(exported, env_name), episodes=2, seed=7)
+        b = ev.evaluate(original, ev.choose_env(original, env_name), episodes=2, seed=7)
+        assert a.summary()["per_episode"] == b.summary()["per_episode"]
+    assert ev.summarize(tmp_path / "model").stages[0].status == "passed"
+    assert main(["--export", str(tmp_path / "nothing"), "--to", str(tmp_path / "x")]) == 2
+    assert "not a run folder" in capsys.readouterr().err

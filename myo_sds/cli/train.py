@@ -4,6 +4,7 @@
     myo-sds-train --config quickstart             # a bundled config, by name
     python train.py --resume runs/quickstart-20261122-101500-s0 [--max-hours 8] [--total-steps N]
     python train.py --status runs/quickstart-20261122-101500-s0 [--json summary.json]
+    python train.py --export runs/quickstart-20261122-101500-s0 --to models/quickstart [--load-checkpoint N]
 """
 
 from __future__ import annotations
@@ -25,6 +26,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     source.add_argument("--status", type=Path, metavar="RUN_DIR",
                         help="print the run's stage table (steps, hours, measured value against the threshold) and exit")
     parser.add_argument("--json", type=Path, metavar="FILE", help="with --status: also write the summary as JSON")
+    source.add_argument("--export", type=Path, metavar="RUN_DIR",
+                        help="copy the run's final model (else its latest checkpoint) with its statistics, curriculum "
+                             "state, config and curriculum to --to, for sharing")
+    parser.add_argument("--to", type=Path, metavar="DIR", help="with --export: the model folder to write")
+    parser.add_argument("--load-checkpoint", type=int, metavar="STEPS", help="with --export: that checkpoint")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="override a config value, e.g. --set n_envs=8 --set ppo.batch_size=256")
     parser.add_argument("--seed", type=int, help="same as --set seed=N")
@@ -37,6 +43,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="stop after H hours of training in this call (checkpointed; --resume continues)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
+    if args.export and args.to is None:
+        parser.error("--export needs --to DIR")
     if args.resume and (args.overrides or args.seed is not None or args.n_envs is not None or args.run_dir):
         parser.error("--resume continues a run as configured; only --total-steps, --max-hours and "
                      "--no-progress apply")
@@ -64,10 +72,30 @@ def show_status(run_dir: Path, json_path: Path | None) -> int:
     return 0
 
 
+def export_model(run_dir: Path, destination: Path, steps: int | None) -> int:
+    from myo_sds.run_folder import RunFolder
+
+    run = RunFolder(run_dir)
+    try:
+        if not run.looks_like_run():
+            raise FileNotFoundError(f"{run_dir}: not a run folder (no config.yaml and checkpoints/ inside)")
+        checkpoint = None if steps is None else run.checkpoint(steps)
+        if checkpoint is not None and not checkpoint.complete():
+            raise FileNotFoundError(f"{run_dir}: no complete checkpoint at {steps} steps")
+        target = run.export_model(destination, checkpoint)
+    except FileNotFoundError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    print(f"wrote {target.path}: {', '.join(sorted(p.name for p in target.path.iterdir()))}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     if args.status:
         return show_status(args.status, args.json)
+    if args.export:
+        return export_model(args.export, args.to, args.load_checkpoint)
     from myo_sds.curricula.schema import load_run_config
 
     try:
