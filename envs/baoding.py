@@ -209,8 +209,7 @@ class BaodingEnv(MuscleHandEnv):
 
     def _reward_terms(self) -> dict[str, float]:
         obs, knobs = self._obs, self.knobs
-        dist_1 = vector_norm(obs[41:44])
-        dist_2 = vector_norm(obs[44:47])
+        dist_1, dist_2 = vector_norm(obs[41:44]), vector_norm(obs[44:47])  # each ball to its target
         dropped = obs[25] < knobs.drop_height or obs[31] < knobs.drop_height
         solved = dist_1 < knobs.solved_radius and dist_2 < knobs.solved_radius and not dropped
         return {

@@ -126,13 +126,12 @@ class DieEnv(MuscleHandEnv):
 
     def _observe(self) -> np.ndarray:
         data, obs = self.data, self._obs
+        die, goal = self._object_site, self._goal_site
         obs[0:22] = data.qpos[:22]
         obs[22:45] = data.qvel[:23] * self.dt
-        obs[45:48] = data.site_xpos[self._object_site]
-        obs[48:51] = data.site_xpos[self._goal_site]
+        obs[45:48], obs[48:51] = data.site_xpos[die], data.site_xpos[goal]
         obs[51:54] = obs[48:51] - obs[45:48] - self._goal_object_offset
-        obs[54:57] = mat_to_euler(data.site_xmat[self._object_site].reshape(3, 3))
-        obs[57:60] = mat_to_euler(data.site_xmat[self._goal_site].reshape(3, 3))
+        obs[54:57], obs[57:60] = (mat_to_euler(data.site_xmat[site].reshape(3, 3)) for site in (die, goal))
         obs[60:63] = obs[57:60] - obs[54:57]
         obs[63:102] = data.act
         return obs

@@ -277,6 +277,15 @@ class RunFolder:
         return target
 
     @classmethod
+    def require(cls, path: Path) -> "RunFolder":
+        """The run (or model) folder ``path`` names, else ``FileNotFoundError`` saying why."""
+        folder = cls.containing(path) if Path(path).exists() else None
+        if folder is None:
+            raise FileNotFoundError(f"{path}: not a run folder (no {CONFIG_FILE} with {CHECKPOINT_DIR}/ or "
+                                    f"{FINAL_MODEL} inside)")
+        return folder
+
+    @classmethod
     def containing(cls, path: Path) -> "RunFolder | None":
         """The run folder that is ``path`` or holds it (a checkpoint file, ``checkpoints/``)."""
         path = Path(path)

@@ -75,10 +75,8 @@ def show_status(run_dir: Path, json_path: Path | None) -> int:
 def export_model(run_dir: Path, destination: Path, steps: int | None) -> int:
     from myo_sds.run_folder import RunFolder
 
-    run = RunFolder(run_dir)
     try:
-        if not run.looks_like_run():
-            raise FileNotFoundError(f"{run_dir}: not a run folder (no config.yaml and checkpoints/ inside)")
+        run = RunFolder.require(run_dir)
         checkpoint = None if steps is None else run.checkpoint(steps)
         if checkpoint is not None and not checkpoint.complete():
             raise FileNotFoundError(f"{run_dir}: no complete checkpoint at {steps} steps")
@@ -97,11 +95,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.export:
         return export_model(args.export, args.to, args.load_checkpoint)
     from myo_sds.curricula.schema import load_run_config
+    from myo_sds.run_folder import RunFolder
 
     try:
         # Check the config before torch and MuJoCo load, so a typo is reported at once.
         if args.resume:
-            load_run_config(args.resume / "config.yaml")
+            load_run_config(RunFolder(args.resume).config_file)
         else:
             load_run_config(args.config, tuple(args.overrides))
     except (ConfigError, FileNotFoundError) as error:

@@ -63,9 +63,10 @@ def resolve_checkpoint(target: str | Path, checkpoint_steps: int | None = None,
     if not path.exists():
         raise EvaluationError(f"{path}: no such run folder or checkpoint")
     if path.is_dir():
-        run = RunFolder.containing(path)
-        if run is None:
-            raise EvaluationError(f"{path}: not a run folder (no config.yaml and checkpoints/ inside)")
+        try:
+            run = RunFolder.require(path)
+        except FileNotFoundError as error:
+            raise EvaluationError(str(error)) from None
         if checkpoint_steps is not None:
             files = run.checkpoint(checkpoint_steps)
             if not files.model.is_file():

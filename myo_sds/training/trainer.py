@@ -144,7 +144,7 @@ class CurriculumTrainer:
                total_steps: int | None = None) -> "CurriculumTrainer":
         """Continue a run from its latest complete checkpoint: same stage, counters, optimizer,
         normalization state and random streams, same TensorBoard folder. ``total_steps`` raises
-        the run's step budget (recorded in its config.yaml), which also continues a run that
+        the run's step budget (recorded in its config), which also continues a run that
         ended at its budget."""
         from stable_baselines3.common.logger import Logger
         from stable_baselines3.common.vec_env import VecNormalize
