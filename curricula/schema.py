@@ -164,6 +164,23 @@ class NormalizeConfig:
 
 
 @dataclass(frozen=True)
+class RolloutConfig:
+    """Where rollouts are collected. ``local``: the envs of the training process. ``ray``:
+    ``workers`` Ray actors, each stepping ``envs_per_worker`` envs with a copy of the policy
+    (``n_envs`` is then workers x envs_per_worker); ``address``: the cluster to join (``auto``:
+    the one started with ``ray start``; null: a cluster of this machine only)."""
+
+    backend: str = "local"
+    workers: int = 2
+    envs_per_worker: int | None = None  # None: n_envs / workers
+    address: str | None = None
+    max_restarts: int = 3  # a worker that dies more often than this in a row stops the run
+
+
+ROLLOUT_BACKENDS = ("local", "ray")
+
+
+@dataclass(frozen=True)
 class RunConfig:
     curriculum: Curriculum
     curriculum_path: Path
@@ -180,6 +197,7 @@ class RunConfig:
     policy: PolicyConfig = PolicyConfig()
     ppo: PpoConfig = PpoConfig()
     normalize: NormalizeConfig = NormalizeConfig()
+    rollout: RolloutConfig = RolloutConfig()
     source: Mapping[str, Any] = field(default_factory=dict)  # the YAML as read, for the run folder
 
 
@@ -324,7 +342,7 @@ def load_curriculum(path: str | Path) -> Curriculum:
 
 # -- run config --------------------------------------------------------------------------
 
-RUN_KEYS = ("curriculum", "seed", "n_envs", "vec_env", "env_threads", "device", "num_threads", "total_steps",
+RUN_KEYS = ("curriculum", "seed", "n_envs", "vec_env", "env_threads", "device", "num_threads", "total_steps", "rollout",
             "checkpoint_every", "keep_checkpoints", "output_dir", "policy", "ppo", "normalize")
 
 
@@ -345,6 +363,22 @@ def _set_key(reader: YamlReader, raw: dict[str, Any], assignment: str) -> None:
         node[keys[-1]] = yaml.safe_load(text)
     except yaml.YAMLError as error:
         raise ConfigError(f"--set {assignment}: not a valid YAML value: {error}") from None
+
+
+def _rollout(reader: YamlReader, raw: Any) -> RolloutConfig:
+    names = ("backend", "workers", "envs_per_worker", "address", "max_restarts")
+    raw = reader.mapping("rollout", raw, names)
+    values: dict[str, Any] = {}
+    if "backend" in raw:
+        values["backend"] = reader.choice("rollout.backend", raw["backend"], ROLLOUT_BACKENDS)
+    for key, low in (("workers", 1), ("max_restarts", 0)):
+        if key in raw:
+            values[key] = reader.number(f"rollout.{key}", raw[key], integer=True, low=low)
+    if raw.get("envs_per_worker") is not None:
+        values["envs_per_worker"] = reader.number("rollout.envs_per_worker", raw["envs_per_worker"], integer=True, low=1)
+    if raw.get("address") is not None:
+        values["address"] = reader.string("rollout.address", raw["address"])
+    return RolloutConfig(**values)
 
 
 def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunConfig:
@@ -385,6 +419,16 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
                                "(it lives in the fast policy class)")
     values["ppo"] = _dataclass_from(reader, "ppo", raw.get("ppo"), PpoConfig)
     values["normalize"] = _dataclass_from(reader, "normalize", raw.get("normalize"), NormalizeConfig)
+    values["rollout"] = _rollout(reader, raw.get("rollout"))
+    if values["rollout"].backend == "ray":
+        rollout_config = values["rollout"]
+        n_envs = values.get("n_envs", RunConfig.n_envs)
+        per_worker = rollout_config.envs_per_worker or n_envs // rollout_config.workers
+        if per_worker < 1:
+            raise reader.error("rollout.envs_per_worker", f"must be >= 1 (n_envs {n_envs} over "
+                               f"{rollout_config.workers} workers gives {per_worker})")
+        values["rollout"] = RolloutConfig(**{**rollout_config.__dict__, "envs_per_worker": per_worker})
+        values["n_envs"] = rollout_config.workers * per_worker
     curriculum = load_curriculum(curriculum_path)
     config = RunConfig(curriculum=curriculum, curriculum_path=curriculum_path, source=raw, **values)
     rollout = config.ppo.n_steps * config.n_envs

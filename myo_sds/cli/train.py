@@ -120,7 +120,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     print(f"run folder: {trainer.run_dir}  (seed {trainer.config.seed})")
-    state = trainer.run(max_wall_s=args.max_hours * 3600 if args.max_hours is not None else None)
+    try:
+        state = trainer.run(max_wall_s=args.max_hours * 3600 if args.max_hours is not None else None)
+    finally:
+        trainer.close()
     print(f"{state.status.value} at step {state.num_timesteps}, stage {state.stage_index + 1}/"
           f"{len(trainer.config.curriculum.stages)} ({trainer.stage.name}); run folder: {trainer.run_dir}")
     return 130 if state.status is RunStatus.INTERRUPTED else 0

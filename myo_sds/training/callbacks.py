@@ -77,6 +77,19 @@ class EpisodeCollector(BaseCallback):
         if torch.get_num_threads() != threads:
             torch.set_num_threads(threads)
 
+    def add_remote_results(self, episodes: list[tuple[int, float, int, EpisodeResult]],
+                           term_sums: list[dict[str, float]], term_count: int, steps: int) -> None:
+        """What rollout workers saw: ``(env step, wall time, stage begun in, result)`` per
+        finished episode (the current stage's are kept), their reward-term sums, their steps."""
+        self.results.extend((step, wall_s, result) for step, wall_s, stage, result in episodes
+                            if stage == self.stage_index)
+        for sums in term_sums:
+            for key, value in sums.items():
+                self.term_sums[key] = self.term_sums.get(key, 0.0) + value
+        self.term_count += term_count
+        if self.progress_bar is not None:
+            self.progress_bar.update(steps)
+
     def pop_results(self) -> list[tuple[int, float, EpisodeResult]]:
         results, self.results = self.results, []
         return results

@@ -51,6 +51,21 @@ def build_vec_env(config: RunConfig, stage: Stage):
                         clip_obs=norm.clip_obs, clip_reward=norm.clip_reward, gamma=config.ppo.gamma)
 
 
+def build_statistics_venv(config: RunConfig, stage: Stage):
+    """For the Ray backend: the envs' spaces and count under the VecNormalize that holds the
+    merged statistics (the envs themselves run on the workers)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from myo_sds.training.ray_rollouts import StatisticsOnlyVecEnv
+
+    probe = TASK_SPECS[config.curriculum.task].env_class()(distribution=stage.distribution)
+    stand_in = StatisticsOnlyVecEnv(config.n_envs, probe.observation_space, probe.action_space)
+    probe.close()
+    norm = config.normalize
+    return VecNormalize(stand_in, norm_obs=norm.observations, norm_reward=norm.rewards,
+                        clip_obs=norm.clip_obs, clip_reward=norm.clip_reward, gamma=config.ppo.gamma)
+
+
 def build_model(config: RunConfig, venv, settings: PpoSettings):
     """A new RecurrentPPO model over ``venv`` with the run's policy and ``settings``."""
     import torch

@@ -18,11 +18,16 @@ import numpy as np
 from myo_sds.envs.knobs import TaskKnobs
 
 
+class WorkerLost(RuntimeError):
+    """A rollout worker kept dying; the run stops after a checkpoint."""
+
+
 class RolloutCollector(Protocol):
     """Where the trainer's samples come from."""
 
     venv: Any  # the VecNormalize whose statistics are checkpointed with the model
     env_seconds: float  # wall time spent stepping envs so far
+    restarts: int  # workers lost and restarted so far (a local backend has none)
 
     def collect(self, model, callback) -> bool:
         """Fill ``model.rollout_buffer`` with ``model.n_steps`` steps of every env; False when
@@ -58,6 +63,8 @@ class WallClock:
 
 class LocalRollouts:
     """The envs of this process under one VecNormalize."""
+
+    restarts = 0
 
     def __init__(self, venv) -> None:
         self.venv = venv

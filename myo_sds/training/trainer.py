@@ -43,9 +43,9 @@ from myo_sds.run_folder import (
 )
 from myo_sds.threads import UpdateThreads, available_cpus
 from myo_sds.training.callbacks import EpisodeCollector, UpdateInterrupted
-from myo_sds.training.factory import apply_ppo_settings, build_model, build_vec_env
+from myo_sds.training.factory import apply_ppo_settings, build_model, build_statistics_venv, build_vec_env
 from myo_sds.training.progress import StageProgressBar
-from myo_sds.training.rollout import LocalRollouts, RolloutCollector
+from myo_sds.training.rollout import LocalRollouts, RolloutCollector, WorkerLost
 
 RESUMABLE = (RunStatus.RUNNING, RunStatus.INTERRUPTED, RunStatus.TIME_LIMIT)
 
@@ -69,6 +69,22 @@ def resumed_tensorboard_format(folder: str, purge_step: int):
     output.writer = SummaryWriter(log_dir=folder, purge_step=purge_step)
     output._is_closed = False
     return output
+
+
+def _rollouts(config: RunConfig, model, stage: Stage, settings) -> RolloutCollector:
+    """The config's rollout backend for ``model`` (whose env is the envs, or on Ray the holder
+    of the merged normalization statistics)."""
+    venv = model.get_env()
+    if config.rollout.backend == "local":
+        return LocalRollouts(venv)
+    import torch
+
+    from myo_sds.training.ray_rollouts import RayRollouts
+
+    # The learner never resets the stand-in envs (that would feed zeros to the statistics).
+    model._last_obs = venv.venv.reset()
+    model._last_episode_starts = np.ones(venv.num_envs, dtype=bool)
+    return RayRollouts(config, venv, stage.distribution, settings, torch.get_rng_state())
 
 
 class CurriculumTrainer:
@@ -134,10 +150,11 @@ class CurriculumTrainer:
         folder.write_provenance(yaml.safe_dump(resolved, sort_keys=False), config.curriculum_path.read_text())
         set_random_seed(config.seed)
         state = CurriculumState()
-        venv = build_vec_env(config, config.curriculum.stages[0])
-        model = build_model(config, venv, ppo_settings_at(config, 0, state.stage_starts(), 0))
+        stage, settings = config.curriculum.stages[0], ppo_settings_at(config, 0, state.stage_starts(), 0)
+        venv = build_vec_env(config, stage) if config.rollout.backend == "local" else build_statistics_venv(config, stage)
+        model = build_model(config, venv, settings)
         model.set_logger(configure(str(folder.tensorboard_dir), ["tensorboard"]))
-        return cls(config, folder, state, model, LocalRollouts(venv), progress)
+        return cls(config, folder, state, model, _rollouts(config, model, stage, settings), progress)
 
     @classmethod
     def resume(cls, run_dir: str | Path, progress: bool = True,
@@ -170,10 +187,12 @@ class CurriculumTrainer:
             folder.config_file.write_text(yaml.safe_dump(dict(config.source), sort_keys=False))
         state.status = RunStatus.RUNNING
         stage = config.curriculum.stages[state.stage_index]
-        venv = VecNormalize.load(str(checkpoint.vecnormalize), build_vec_env(config, stage).venv)
+        envs = (build_vec_env(config, stage) if config.rollout.backend == "local" else build_statistics_venv(config, stage))
+        venv = VecNormalize.load(str(checkpoint.vecnormalize), envs.venv)
         venv.training = True
         model = load_model(str(checkpoint.model), env=venv, device=config.device)
-        rollouts = LocalRollouts(venv)
+        settings = ppo_settings_at(config, state.stage_index, state.stage_starts(), state.num_timesteps)
+        rollouts = _rollouts(config, model, stage, settings)
         # Loading reseeds torch, numpy and the envs' next reset with the run's seed: continue
         # the streams of the checkpoint instead, so the resumed run draws new episodes.
         rollouts.restore_random_state(checkpoint.read_random_state(), fallback_seed=config.seed + state.num_timesteps)
@@ -221,7 +240,13 @@ class CurriculumTrainer:
                                             f"`python train.py --resume {self.run_dir}`")
                     break
                 self.apply_ppo_settings()  # a decaying rate or a warm-up's end acts between rollouts
-                self._iterate()
+                try:
+                    self._iterate()
+                except WorkerLost as error:
+                    state.status = RunStatus.INTERRUPTED
+                    self.progress_bar.write(f"{error}; saving a checkpoint; continue with "
+                                            f"`python train.py --resume {self.run_dir}`")
+                    break
                 self._after_rollout()
                 if collector.stop_requested:
                     state.status = RunStatus.INTERRUPTED
@@ -295,6 +320,8 @@ class CurriculumTrainer:
             logger.record("time/env_stepping_share", timing.env_s / timing.wall_s)
             logger.record("time/update_share", timing.update_s / timing.wall_s)
         logger.record("time/update_threads", self.update_threads.current)
+        if self.config.rollout.backend != "local":
+            logger.record("rollout/worker_restarts", self.rollouts.restarts)
         logger.record("curriculum/stage_index", state.stage_index)
         logger.record("curriculum/stage_steps", self.progress.steps)
         if not math.isnan(self.progress.measured):
@@ -341,6 +368,10 @@ class CurriculumTrainer:
         name = self.stage.name
         state.episodes_per_stage[name] = self.progress.episodes
         state.steps_per_stage[name] = self.progress.steps
+
+    def close(self) -> None:
+        """Release the envs (and a Ray backend's workers)."""
+        self.rollouts.close()
 
     def save_checkpoint(self) -> Path:
         """Model, statistics, curriculum state and random streams of this step (``run_folder``)."""
