@@ -54,6 +54,8 @@ class StatisticsOnlyVecEnv(VecEnv):
         pass
 
     def get_attr(self, attr_name, indices=None):
+        if attr_name == "render_mode":  # asked by VecEnv's constructor
+            return [None] * self.num_envs
         raise AttributeError(attr_name)
 
     def set_attr(self, attr_name, value, indices=None) -> None:
@@ -66,6 +68,22 @@ class StatisticsOnlyVecEnv(VecEnv):
         return [False] * self.num_envs
 
 
+def _check_reachable(address: str | None, timeout_s: float = 5.0) -> None:
+    """A ``host:port`` address that answers no TCP connection fails at once (ray.init would wait
+    minutes); ``auto`` and ``ray://`` addresses are left to Ray."""
+    import socket
+
+    if not address or address == "auto" or "://" in address or ":" not in address:
+        return
+    host, _, port = address.rpartition(":")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout_s):
+            return
+    except (OSError, ValueError) as error:
+        raise ConfigError(f"rollout.address: no Ray cluster answers at {address} ({error}); start one with "
+                          "`ray start --head --port=6379` there, or leave address unset for this machine only") from None
+
+
 def connect(config: RunConfig) -> None:
     """Start or join the Ray cluster the config names, checking it has room for the workers."""
     try:
@@ -73,6 +91,7 @@ def connect(config: RunConfig) -> None:
     except ImportError:
         raise ConfigError("rollout.backend: ray needs the ray package: pip install 'ray>=2.58,<2.61'") from None
     if not ray.is_initialized():
+        _check_reachable(config.rollout.address)
         try:
             if config.rollout.address:
                 ray.init(address=config.rollout.address, log_to_driver=False)
@@ -104,6 +123,9 @@ class RayRollouts:
                         for index in range(config.rollout.workers)]
         self.distribution = distribution
         self.env_seconds = 0.0
+        # Where a rollout's wall time goes, summed: putting the weights, waiting for the workers,
+        # filling the buffer and merging the statistics.
+        self.seconds = {"broadcast": 0.0, "sampling": 0.0, "gathering": 0.0}
         ready, waiting = ray.wait([worker.pid.remote() for worker in self.workers], num_returns=len(self.workers),
                                   timeout=PLACEMENT_TIMEOUT_S)
         if waiting:
@@ -119,10 +141,14 @@ class RayRollouts:
         callback.on_rollout_start()
         started = time.perf_counter()
         weights = ray.put({k: v.detach().cpu() for k, v in model.policy.state_dict().items()})
+        put_at = time.perf_counter()
+        self.seconds["broadcast"] += put_at - started
         settings = PpoSettings(model.learning_rate, model.n_steps, model.batch_size, model.n_epochs,
                                model.clip_range(1.0), model.ent_coef)
         stats = (self.venv.obs_rms, self.venv.ret_rms)
         results = self._gather(weights, stats, settings, callback.stage_index)
+        gathered_at = time.perf_counter()
+        self.seconds["sampling"] += gathered_at - put_at
         buffer, k = model.rollout_buffer, self.k
         buffer.reset()  # the last update's get() flattened its arrays
         for index, result in enumerate(results):
@@ -145,6 +171,7 @@ class RayRollouts:
         callback.add_remote_results(episodes, [r["term_sums"] for r in results], sum(r["term_count"] for r in results),
                                     model.n_steps * n_envs)
         self.env_seconds += max(r["seconds"] for r in results)
+        self.seconds["gathering"] += time.perf_counter() - gathered_at
         callback.on_rollout_end()
         return True
 

@@ -169,3 +169,9 @@ class RolloutWorker:
         import os
 
         return os.getpid()
+
+    def node_id(self) -> str:
+        """The Ray node this worker runs on (a worker run outside Ray has none)."""
+        import ray
+
+        return ray.get_runtime_context().get_node_id()
