@@ -66,7 +66,12 @@ def show_status(run_dir: Path, json_path: Path | None) -> int:
     except (ConfigError, FileNotFoundError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    print(format_summary(summary))
+    try:
+        print(format_summary(summary), flush=True)
+    except BrokenPipeError:  # `train.py --status RUN | head`
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     if json_path is not None:
         json_path.write_text(json.dumps(summary.to_dict(), indent=2))
     return 0
