@@ -71,15 +71,17 @@ def test_two_workers_train_through_a_killed_worker_and_resume_on_either_backend(
     pid = ray.get(trainer.rollouts.workers[1].pid.remote())
     rollout_start = trainer.collector._on_rollout_start
 
-    def kill_worker_during_the_third_rollout() -> None:
+    def kill_workers_during_rollouts() -> None:
         rollout_start()
-        if trainer.model.num_timesteps == 256:
+        if trainer.model.num_timesteps == 256:  # the OS process of worker 1, mid-rollout
             threading.Timer(0.05, os.kill, (pid, signal.SIGKILL)).start()
+        if trainer.model.num_timesteps == 512:  # worker 0, through Ray
+            threading.Timer(0.05, ray.kill, (trainer.rollouts.workers[0],), {"no_restart": False}).start()
 
-    trainer.collector._on_rollout_start = kill_worker_during_the_third_rollout
+    trainer.collector._on_rollout_start = kill_workers_during_rollouts
     state = trainer.run()
     assert state.status is RunStatus.BUDGET_REACHED and state.num_timesteps == 1024
-    assert trainer.rollouts.restarts == 1
+    assert trainer.rollouts.restarts == 2
     assert ray.get(trainer.rollouts.workers[1].pid.remote()) != pid  # a new process
     episodes = RunFolder(trainer.run_dir).read_episodes()
     steps = [e.step for e in episodes]
@@ -107,3 +109,22 @@ def test_bad_ray_settings_stop_before_training_with_one_line(tmp_path, monkeypat
     with pytest.raises(ConfigError, match="rollout.backend: ray needs the ray package"):
         CurriculumTrainer.start(config, ("rollout.backend=ray", "rollout.workers=1"), run_dir=tmp_path / "c",
                                 progress=False)
+
+
+def test_a_worker_that_keeps_dying_stops_the_run_with_a_checkpoint(tmp_path, capsys):
+    overrides = ("rollout.backend=ray", "rollout.workers=1", "rollout.max_restarts=0")
+    trainer = CurriculumTrainer.start(write_config(tmp_path, total=100_000), overrides, run_dir=tmp_path / "run",
+                                      progress=False)
+    rollout_start = trainer.collector._on_rollout_start
+
+    def kill_at_the_third_rollout() -> None:
+        rollout_start()
+        if trainer.model.num_timesteps == 256:
+            threading.Timer(0.05, ray.kill, (trainer.rollouts.workers[0],), {"no_restart": False}).start()
+
+    trainer.collector._on_rollout_start = kill_at_the_third_rollout
+    state = trainer.run()
+    trainer.close()
+    assert state.status is RunStatus.INTERRUPTED and state.num_timesteps == 256
+    assert "rollout worker 0 died 1 times in a row" in capsys.readouterr().out
+    assert RunFolder(trainer.run_dir).latest_checkpoint().steps == 256  # nothing of the lost rollout counted

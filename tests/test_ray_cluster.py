@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import pytest
-
 from myo_sds.curricula.schema import ConfigError
+from tiny_run import write_config
+
 from myo_sds.run_folder import RunStatus
 from myo_sds.training import CurriculumTrainer
-from tiny_run import write_config
 
 ray = pytest.importorskip("ray")
 pytestmark = pytest.mark.slow  # a two-node cluster starts and stops

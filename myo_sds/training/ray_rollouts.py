@@ -186,9 +186,8 @@ class RayRollouts:
         worker 0's, so a one-worker checkpoint resumes on the local backend where it left off."""
         import random
 
-        import ray
 
-        states = ray.get([worker.random_state.remote() for worker in self.workers])
+        states = [self._call(index, "random_state") for index in range(len(self.workers))]
         return {"envs": [g for state in states for g in state["envs"]], "python": random.getstate(),
                 "numpy": np.random.get_state(), "torch": states[0]["torch"],
                 "worker_torch": [state["torch"] for state in states]}
@@ -251,26 +250,30 @@ class RayRollouts:
                 pending[index] = self.workers[index].rollout.remote(weights, *stats, settings, stage_index)
         return [results[index] for index in range(len(self.workers))]
 
-    def _wait_until_alive(self, index: int, timeout_s: float = 120.0) -> None:
-        """After Ray restarts a worker (its constructor runs again), give it the current stage."""
+    def _call(self, index: int, method: str, *args, timeout_s: float = 120.0):
+        """A call on worker ``index`` that waits out a restart of the worker."""
         import ray
-        import torch
-        from gymnasium.utils import seeding
         from ray.exceptions import RayActorError
 
         deadline = time.monotonic() + timeout_s
-        worker, base = self.workers[index], (self.config.seed + 7919 * self.restarts) * 1000
         while True:
             try:
-                ray.get(worker.set_stage.remote(self.distribution))
-                # Fresh streams: the rebuilt envs would otherwise replay the run's first episodes.
-                envs = [seeding.np_random(base + index * self.k + rank)[0] for rank in range(self.k)]
-                ray.get(worker.restore_random_state.remote(envs, torch.Generator().manual_seed(base + index).get_state()))
-                return
+                return ray.get(getattr(self.workers[index], method).remote(*args))
             except RayActorError:
                 if time.monotonic() > deadline:
-                    raise WorkerLost(f"rollout worker {index} did not come back within {timeout_s:.0f} s") from None
+                    raise WorkerLost(f"rollout worker {index} did not answer within {timeout_s:.0f} s") from None
                 time.sleep(0.5)
+
+    def _wait_until_alive(self, index: int, timeout_s: float = 120.0) -> None:
+        """After Ray restarts a worker (its constructor runs again), give it the current stage."""
+        import torch
+        from gymnasium.utils import seeding
+
+        base = (self.config.seed + 7919 * self.restarts) * 1000
+        self._call(index, "set_stage", self.distribution, timeout_s=timeout_s)
+        # Fresh streams: the rebuilt envs would otherwise replay the run's first episodes.
+        envs = [seeding.np_random(base + index * self.k + rank)[0] for rank in range(self.k)]
+        self._call(index, "restore_random_state", envs, torch.Generator().manual_seed(base + index).get_state())
 
     def _merge_statistics(self, results: list[dict[str, Any]]) -> None:
         """Worker 0's statistics (the learner's plus what it saw, updated step by step) plus
