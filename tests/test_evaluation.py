@@ -81,7 +81,7 @@ def test_cli_writes_json_plots_and_video(run_dir, tmp_path):
     result = subprocess.run(
         [sys.executable, str(REPO / "evaluate.py"), str(run_dir), "--env", "p1", "--episodes", "3",
          "--json", str(out / "e.json"), "--plots", str(out), "--video", str(out / "v.mp4"),
-         "--video-episodes", "2"], capture_output=True, text=True, env=env, timeout=600)
+         "--video-episodes", "1"], capture_output=True, text=True, env=env, timeout=600)
     assert result.returncode == 0, result.stderr
     assert "score" in result.stdout and "drop rate" in result.stdout
     data = json.loads((out / "e.json").read_text())
@@ -100,12 +100,12 @@ def test_cli_writes_json_plots_and_video(run_dir, tmp_path):
     assert iio.imread(out / f"learning_curve_{run_dir.name}.png").shape[:2] == (800, 900)
 
     frames = iio.imread(out / "v.mp4")
-    # The video replays the best and the worst of the 3 episodes, each followed by its last frame
-    # held for 2 s at 40 fps.
-    ranked = sorted(report["per_episode"], key=lambda e: (e["score"], e["length"]))
-    assert frames.shape == (ranked[-1]["length"] + ranked[0]["length"] + 2 * 80, 480, 640, 3)
+    # The video replays the best of the 3 episodes (rendering is slow in software; the choice of
+    # best and worst is tested below), then holds its last frame for 2 s at 40 fps.
+    best = max(report["per_episode"], key=lambda e: (e["score"], e["length"]))
+    assert frames.shape == (best["length"] + 80, 480, 640, 3)
     assert frames.std() > 10  # an actual picture, not a blank frame
-    assert "best of 3" in result.stdout and "worst of 3" in result.stdout
+    assert "best of 3" in result.stdout
 
 
 def test_video_episodes_are_the_best_and_the_worst():
