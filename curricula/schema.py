@@ -17,10 +17,6 @@ from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
 
 METRICS = ("score", "survival")
-METRIC_HELP = {
-    "score": "official per-episode score (Baoding: solved steps / 200, drops count as unsolved)",
-    "survival": "fraction of episodes that end without a drop",
-}
 ON_MAX_STEPS = ("advance", "stop")
 
 

@@ -43,8 +43,6 @@ class Range:
     def is_fixed(self) -> bool:
         return self.low == self.high
 
-    def to_yaml(self) -> float | list[float]:
-        return self.low if self.is_fixed else [self.low, self.high]
 
 
 def parse_range(name: str, value: Any, *, minimum: float | None = None,

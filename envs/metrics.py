@@ -38,10 +38,6 @@ class EpisodeResult:
             return float(self.solved_steps > DIE_SUCCESS_STEPS)
         return self.solved_steps / self.horizon
 
-    @property
-    def solved_fraction(self) -> float:
-        """Solved steps over the full horizon (Baoding's official score)."""
-        return self.solved_steps / self.horizon
 
     def to_dict(self) -> dict:
         return {**asdict(self), "score": self.score}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -26,7 +25,6 @@ class EpisodeCollector(BaseCallback):
         super().__init__(verbose=0)
         self.run_wall_s = run_wall_s
         self.update_threads = update_threads
-        self.rollout_ended_at: float | None = None  # None while a rollout is being collected
         self.terms = tuple(t for t in terms if t != "done")
         self.stage_index = stage_index
         self.episode_stage = [stage_index] * n_envs  # stage each env's current episode began in
@@ -56,10 +54,8 @@ class EpisodeCollector(BaseCallback):
         # Env threads need the cores while collecting; torch's idle OpenMP workers would
         # spin on them. Policy inference on a few dozen observations needs one thread.
         self._set_threads(1)
-        self.rollout_ended_at = None
 
     def _on_rollout_end(self) -> None:
-        self.rollout_ended_at = time.perf_counter()
         self._set_threads(self.update_threads.threads())
 
     def before_optimizer_step(self, optimizer, args, kwargs) -> None:

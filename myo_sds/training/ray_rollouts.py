@@ -118,7 +118,6 @@ class RayRollouts:
         self.k = config.rollout.envs_per_worker
         self.restarts = 0
         remote = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=0)(RolloutWorker)
-        self._remote = remote
         self.workers = [remote.remote(config, index, distribution, settings, torch_rng if index == 0 else None)
                         for index in range(config.rollout.workers)]
         self.distribution = distribution
@@ -126,7 +125,7 @@ class RayRollouts:
         # Where a rollout's wall time goes, summed: putting the weights, waiting for the workers,
         # filling the buffer and merging the statistics.
         self.seconds = {"broadcast": 0.0, "sampling": 0.0, "gathering": 0.0}
-        ready, waiting = ray.wait([worker.pid.remote() for worker in self.workers], num_returns=len(self.workers),
+        _, waiting = ray.wait([worker.pid.remote() for worker in self.workers], num_returns=len(self.workers),
                                   timeout=PLACEMENT_TIMEOUT_S)
         if waiting:
             self.close()
