@@ -51,6 +51,12 @@ def build_vec_env(config: RunConfig, stage: Stage):
                         clip_obs=norm.clip_obs, clip_reward=norm.clip_reward, gamma=config.ppo.gamma)
 
 
+def build_training_venv(config: RunConfig, stage: Stage):
+    """What the model trains on: the envs themselves (local backend), or on Ray the holder of
+    the merged normalization statistics (the envs run on the workers)."""
+    return build_vec_env(config, stage) if config.rollout.backend == "local" else build_statistics_venv(config, stage)
+
+
 def build_statistics_venv(config: RunConfig, stage: Stage):
     """For the Ray backend: the envs' spaces and count under the VecNormalize that holds the
     merged statistics (the envs themselves run on the workers)."""

@@ -43,7 +43,7 @@ from myo_sds.run_folder import (
 )
 from myo_sds.threads import UpdateThreads, available_cpus
 from myo_sds.training.callbacks import EpisodeCollector, UpdateInterrupted
-from myo_sds.training.factory import apply_ppo_settings, build_model, build_statistics_venv, build_vec_env
+from myo_sds.training.factory import apply_ppo_settings, build_model, build_training_venv
 from myo_sds.training.progress import StageProgressBar
 from myo_sds.training.rollout import LocalRollouts, RolloutCollector, WorkerLost
 
@@ -151,7 +151,7 @@ class CurriculumTrainer:
         set_random_seed(config.seed)
         state = CurriculumState()
         stage, settings = config.curriculum.stages[0], ppo_settings_at(config, 0, state.stage_starts(), 0)
-        venv = build_vec_env(config, stage) if config.rollout.backend == "local" else build_statistics_venv(config, stage)
+        venv = build_training_venv(config, stage)
         model = build_model(config, venv, settings)
         model.set_logger(configure(str(folder.tensorboard_dir), ["tensorboard"]))
         return cls(config, folder, state, model, _rollouts(config, model, stage, settings), progress)
@@ -187,8 +187,7 @@ class CurriculumTrainer:
             folder.config_file.write_text(yaml.safe_dump(dict(config.source), sort_keys=False))
         state.status = RunStatus.RUNNING
         stage = config.curriculum.stages[state.stage_index]
-        envs = (build_vec_env(config, stage) if config.rollout.backend == "local" else build_statistics_venv(config, stage))
-        venv = VecNormalize.load(str(checkpoint.vecnormalize), envs.venv)
+        venv = VecNormalize.load(str(checkpoint.vecnormalize), build_training_venv(config, stage).venv)
         venv.training = True
         model = load_model(str(checkpoint.model), env=venv, device=config.device)
         settings = ppo_settings_at(config, state.stage_index, state.stage_starts(), state.num_timesteps)
