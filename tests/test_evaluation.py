@@ -4,6 +4,7 @@ env, JSON, plots, video, and bad input."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -187,9 +188,23 @@ def test_run_summary_gives_each_stage_its_steps_time_and_measured_value(tiny_run
     assert first.wall_s + second.wall_s <= summary.wall_s
     # The trend ends at the stage's current measured value: the same window of episodes.
     assert second.trend[-1][1] == pytest.approx(second.measured) and len(second.trend) == 5
+    # The current stage's logged episodes split by start phase, recomputed here from episodes.csv.
+    logged = [r for r in tiny_run.path.joinpath("episodes.csv").read_text().splitlines()[1:]
+              if r.split(",")[3] == "hard"]
+    rows = [dict(zip(("score", "dropped", "phase"), (float(f[4]), f[7] == "1", math.degrees(float(f[10])))))
+            for f in (r.split(",") for r in logged)]
+    assert sum(s["episodes"] for s in second.by_start_phase.values()) == len(rows) > 1
+    for name, sector in second.by_start_phase.items():
+        low, high = map(float, name.split("-"))
+        inside = [r for r in rows if low <= r["phase"] < high]
+        assert sector["episodes"] == len(inside)
+        assert sector["score"] == pytest.approx(np.mean([r["score"] for r in inside]))
+        assert sector["drop_rate"] == pytest.approx(np.mean([r["dropped"] for r in inside]))
+    assert first.by_start_phase == {}  # only the current stage is split
     assert main(["--status", str(tiny_run.path), "--json", str(tmp_path / "s.json")]) == 0
     printed = capsys.readouterr().out
     assert "1 easy  passed" in printed and f"score {second.measured:.3f} / 0.9" in printed
+    assert f"stage 2, its last {len(rows):,} episodes by the targets' start phase:" in printed
     assert json.loads((tmp_path / "s.json").read_text())["stages"][1]["trend"][-1][1] == pytest.approx(second.measured)
 
 

@@ -32,6 +32,7 @@ from myo_sds.evaluation.checkpoints import (
     LoadedPolicy,
     load_policy,
 )
+from myo_sds.run_folder import EpisodeRecord
 
 
 @dataclass
@@ -70,8 +71,9 @@ class EvaluationReport:
 PHASE_SECTOR_DEG = 45
 
 
-def per_start_phase(episodes: Sequence[EpisodeResult]) -> dict[str, dict[str, Any]]:
-    """Score and drop rate by the goal's start phase, in 45-degree sectors ("0-45", ...).
+def per_start_phase(episodes: Sequence[EpisodeResult | EpisodeRecord]) -> dict[str, dict[str, Any]]:
+    """Score and drop rate by the goal's start phase, in 45-degree sectors ("0-45", ...), of
+    evaluated episodes or of a run's logged training episodes.
 
     Empty unless the start phase varies between episodes (stages with random phases, P2's
     random start offsets): a policy's average can hide sectors where it always drops the balls.

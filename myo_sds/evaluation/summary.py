@@ -12,9 +12,11 @@ import numpy as np
 
 from myo_sds.curricula.advancement import episode_metric
 from myo_sds.curricula.schema import load_curriculum
+from myo_sds.evaluation.episodes import per_start_phase
 from myo_sds.run_folder import EpisodeRecord, RunFolder
 
 TREND_POINTS = 5  # measured values shown across the current stage
+BREAKDOWN_EPISODES = 2000  # the current stage's latest episodes, split by start phase
 
 
 @dataclass
@@ -30,6 +32,9 @@ class StageSummary:
     window: int | None
     measured: float | None  # at the transition, or now for the current stage
     trend: list[tuple[int, float]] = field(default_factory=list)  # (run env step, measured) in the current stage
+    # The current stage's latest episodes by the targets' start phase: a stage mean that stops
+    # rising often hides sectors where the balls are always dropped.
+    by_start_phase: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 @dataclass
@@ -88,6 +93,7 @@ def summarize(run_dir: str | Path) -> RunSummary:
                     upto = values[steps <= mark][-rule.window:]
                     if len(upto):
                         base.trend.append((int(mark), float(upto.mean())))
+            base.by_start_phase = per_start_phase(in_stage[-BREAKDOWN_EPISODES:])
         stages.append(base)
     return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages)
 
@@ -114,4 +120,18 @@ def format_summary(summary: RunSummary) -> str:
     for s in current:
         points = ", ".join(f"{value:.3f} at {_steps(step)}" for step, value in s.trend)
         lines.append(f"stage {s.index} trend ({s.metric} over the last {s.window} episodes): {points}")
+    for s in summary.stages:
+        if s.by_start_phase:
+            n = sum(sector["episodes"] for sector in s.by_start_phase.values())
+            lines.append(f"stage {s.index}, its last {n:,} episodes by the targets' start phase:")
+            lines.extend(_sector_table(s.by_start_phase))
     return "\n".join(lines)
+
+
+def _sector_table(sectors: dict[str, dict[str, Any]]) -> list[str]:
+    rows = [("  degrees", *sectors),
+            ("  score", *(f"{v['score']:.2f}" for v in sectors.values())),
+            ("  dropped", *(f"{v['drop_rate']:.0%}" for v in sectors.values())),
+            ("  episodes", *(str(v["episodes"]) for v in sectors.values()))]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return ["  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip() for row in rows]
