@@ -27,7 +27,7 @@ import platform
 import sys
 import time
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +65,7 @@ class Transition:
     stage_steps: int
     stage_episodes: int
     measured: float  # the advancement metric over the stage's window
+    wall_s: float | None = None  # the run's training wall time then; None in states written before it was kept
 
 
 @dataclass
@@ -85,6 +86,18 @@ class CurriculumState:
     def stage_starts(self) -> list[int]:
         """The env step at which each stage reached so far began."""
         return [0] + [t.at_step for t in self.history]
+
+    def stage_start_walls(self, episodes: list["EpisodeRecord"]) -> list[float]:
+        """The training wall time at which each stage reached so far began. Transitions
+        written before they kept it take it from the last episode logged by then."""
+        walls = [0.0]
+        for transition in self.history:
+            if transition.wall_s is not None:
+                walls.append(transition.wall_s)
+            else:
+                logged = [e.wall_s for e in episodes if e.step <= transition.at_step]
+                walls.append(logged[-1] if logged else walls[-1])
+        return walls
 
     def to_json(self) -> str:
         values = asdict(self)
@@ -269,11 +282,16 @@ class RunFolder:
             raise FileNotFoundError(f"{self.path}: no final model and no complete checkpoint to export")
         target = RunFolder(destination)
         target.path.mkdir(parents=True, exist_ok=True)
-        model, stats, state = ((self.final_model, self.final_vecnormalize, self.state_file) if checkpoint is None
-                               else (checkpoint.model, checkpoint.vecnormalize, checkpoint.state))
-        for source, copy in ((model, target.final_model), (stats, target.final_vecnormalize), (state, target.state_file),
+        model, stats, state_file = ((self.final_model, self.final_vecnormalize, self.state_file) if checkpoint is None
+                                    else (checkpoint.model, checkpoint.vecnormalize, checkpoint.state))
+        for source, copy in ((model, target.final_model), (stats, target.final_vecnormalize),
                              (self.config_file, target.config_file), (self.curriculum_file, target.curriculum_file)):
             shutil.copyfile(source, copy)
+        # The export has no episode log: keep each stage's start time in the state itself.
+        state = CurriculumState.from_json(state_file.read_text())
+        walls = state.stage_start_walls(self.read_episodes())[1:]
+        state.history = [replace(t, wall_s=wall_s) for t, wall_s in zip(state.history, walls)]
+        target.state_file.write_text(state.to_json())
         return target
 
     @classmethod

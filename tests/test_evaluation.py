@@ -185,7 +185,8 @@ def test_run_summary_gives_each_stage_its_steps_time_and_measured_value(tiny_run
     assert (first.status, first.env_steps, first.episodes) == ("passed", transition.stage_steps, transition.stage_episodes)
     assert first.measured == transition.measured >= first.threshold
     assert second.status == "budget_reached" and second.env_steps == 2048 - transition.at_step
-    assert first.wall_s + second.wall_s <= summary.wall_s
+    assert first.wall_s + second.wall_s == pytest.approx(summary.wall_s)
+    assert first.wall_s == pytest.approx(transition.wall_s) and 0 < transition.wall_s < tiny_run.state.wall_s
     # The trend ends at the stage's current measured value: the same window of episodes.
     assert second.trend[-1][1] == pytest.approx(second.measured) and len(second.trend) == 5
     # The current stage's logged episodes split by start phase, recomputed here from episodes.csv.
@@ -219,6 +220,10 @@ def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, cap
         a = ev.evaluate(exported, ev.choose_env(exported, env_name), episodes=2, seed=7)
         b = ev.evaluate(original, ev.choose_env(original, env_name), episodes=2, seed=7)
         assert a.summary()["per_episode"] == b.summary()["per_episode"]
-    assert ev.summarize(tmp_path / "model").stages[0].status == "passed"
+    # Without the episode log, the export still knows each stage's wall time.
+    run_summary, model_summary = ev.summarize(tiny_run.path), ev.summarize(tmp_path / "model")
+    assert [(s.status, s.env_steps) for s in model_summary.stages] == [(s.status, s.env_steps) for s in run_summary.stages]
+    assert [s.wall_s for s in model_summary.stages] == pytest.approx([s.wall_s for s in run_summary.stages])
+    assert 0 < model_summary.stages[0].wall_s < model_summary.wall_s
     assert main(["--export", str(tmp_path / "nothing"), "--to", str(tmp_path / "x")]) == 2
     assert "not a run folder" in capsys.readouterr().err

@@ -37,3 +37,16 @@ def test_old_run_resumes_in_its_stage(old_run):
     state = CurriculumTrainer.resume(old_run, progress=False, total_steps=384).run()
     assert state.status == "budget_reached" and state.num_timesteps == 384
     assert state.stage_index == 1 and state.history[0].at_step == 256
+
+
+def test_old_run_exports_with_each_stage_wall_time_from_its_episode_log(old_run, tmp_path):
+    # Its transition predates the wall time kept in the state: the export takes it from the log.
+    rows = [line.split(",") for line in (old_run / "episodes.csv").read_text().splitlines()[1:]]
+    stage_1_end = [float(row[1]) for row in rows if int(row[0]) <= 256][-1]
+    assert json.loads((old_run / "curriculum_state.json").read_text())["history"][0].get("wall_s") is None
+    from myo_sds.run_folder import RunFolder
+
+    RunFolder(old_run).export_model(tmp_path / "model")
+    exported = ev.summarize(tmp_path / "model")
+    assert exported.stages[0].wall_s == pytest.approx(stage_1_end) and stage_1_end > 0
+    assert exported.stages[1].wall_s == pytest.approx(exported.wall_s - stage_1_end)

@@ -53,11 +53,6 @@ def _metric_values(records: list[EpisodeRecord], metric: str) -> np.ndarray:
     return np.array([episode_metric(metric, r) for r in records])
 
 
-def _wall_at(records: list[EpisodeRecord], step: int, default: float) -> float:
-    walls = [r.wall_s for r in records if r.step <= step]
-    return walls[-1] if walls else default
-
-
 def summarize(run_dir: str | Path) -> RunSummary:
     """The summary of a run folder (its latest checkpoint's state and its episode log)."""
     folder = RunFolder(run_dir)
@@ -68,7 +63,7 @@ def summarize(run_dir: str | Path) -> RunSummary:
         raise FileNotFoundError(f"{folder.path}: no checkpoint yet, nothing to summarize")
     curriculum = load_curriculum(folder.curriculum_file)
     records = [r for r in folder.read_episodes() if r.step <= state.num_timesteps]
-    starts = state.stage_starts()
+    start_walls = state.stage_start_walls(records)
     stages = []
     for index, stage in enumerate(curriculum.stages):
         rule = stage.advance
@@ -76,14 +71,13 @@ def summarize(run_dir: str | Path) -> RunSummary:
                             rule.threshold if rule else None, rule.window if rule else None, None)
         if index < len(state.history):
             transition = state.history[index]
-            start_wall = _wall_at(records, starts[index], 0.0)
             base.status, base.env_steps, base.episodes = transition.decision, transition.stage_steps, transition.stage_episodes
-            base.wall_s = _wall_at(records, transition.at_step, start_wall) - start_wall
+            base.wall_s = start_walls[index + 1] - start_walls[index]
             base.measured = None if math.isnan(transition.measured) else transition.measured
         elif index == state.stage_index:
             base.status = "current" if state.status.value in ("running", "interrupted", "time_limit") else state.status.value
             base.env_steps, base.episodes = state.num_timesteps - state.stage_start_step, state.stage_episodes
-            base.wall_s = state.wall_s - _wall_at(records, state.stage_start_step, 0.0)
+            base.wall_s = state.wall_s - start_walls[index]
             base.measured = float(np.mean(state.recent)) if state.recent else None
             in_stage = [r for r in records if r.stage_index == index]
             if rule is not None and in_stage:

@@ -335,7 +335,8 @@ class CurriculumTrainer:
         state, model, config = self.state, self.model, self.config
         stage = self.stage
         state.history.append(Transition(stage.name, state.stage_index, decision.value, int(model.num_timesteps),
-                                        self.progress.steps, self.progress.episodes, self.progress.measured))
+                                        self.progress.steps, self.progress.episodes, self.progress.measured,
+                                        state.wall_s))
         state.episodes_per_stage[stage.name] = self.progress.episodes
         state.steps_per_stage[stage.name] = self.progress.steps
         verdict = {Decision.PASSED: "passed", Decision.TIMED_OUT: "ended unpassed (max_steps)",
