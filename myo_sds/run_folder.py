@@ -4,13 +4,16 @@
 
     RUN/
       config.yaml, curriculum.yaml      the resolved run config and its own copy of the curriculum
-      command.txt, versions.json        how the run was started, with which package versions
+      command.txt, versions.json        each session's command line, time and machine; package versions
       curriculum_state.json             the curriculum state of the latest checkpoint
       episodes.csv                      one row per training episode
       checkpoints/                      rl_model_<steps>_steps.zip, rl_model_vecnormalize_<steps>_steps.pkl,
                                         curriculum_state_<steps>_steps.json, random_state_<steps>_steps.pkl
       final_model.zip, final_vecnormalize.pkl
       tb/                               TensorBoard events
+
+An exported model folder (:meth:`RunFolder.export_model`) holds the model, its statistics and
+curriculum state, the config, curriculum and provenance files, and a model card (README.md).
 
 Every file is replaced in one rename (written under a temporary name first), so a crash or a
 ``kill -9`` leaves the previous version readable.
@@ -39,6 +42,9 @@ CHECKPOINT_DIR = "checkpoints"
 LATEST_FILE = "latest.json"
 FINAL_MODEL = "final_model.zip"
 FINAL_VECNORMALIZE = "final_vecnormalize.pkl"
+COMMAND_FILE = "command.txt"
+VERSIONS_FILE = "versions.json"
+MODEL_CARD = "README.md"
 EPISODE_COLUMNS = ("step", "wall_s", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
                    "effort", "direction", "start_phase")
 
@@ -195,6 +201,17 @@ def _atomic_save(path: Path, save) -> None:
     os.replace(tmp, path)
 
 
+def cpu_model() -> str:
+    """The processor's name as Linux reports it, else the platform's."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def package_versions() -> dict[str, str]:
     from importlib import metadata
 
@@ -228,6 +245,9 @@ class RunFolder:
     final_model = _InRun(FINAL_MODEL)
     final_vecnormalize = _InRun(FINAL_VECNORMALIZE)
     tensorboard_dir = _InRun("tb")
+    command_file = _InRun(COMMAND_FILE)
+    versions_file = _InRun(VERSIONS_FILE)
+    model_card = _InRun(MODEL_CARD)
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
@@ -256,14 +276,20 @@ class RunFolder:
         copy, the command line and the package versions."""
         (self.path / CURRICULUM_FILE).write_text(curriculum_yaml)
         (self.path / CONFIG_FILE).write_text(config_yaml)
-        command, versions = self.provenance_files
-        command.write_text(" ".join(sys.argv) + "\n")
-        versions.write_text(json.dumps(package_versions(), indent=2))
+        self.command_file.unlink(missing_ok=True)
+        self.record_session(0)
+        self.versions_file.write_text(json.dumps(package_versions(), indent=2))
 
-    @property
-    def provenance_files(self) -> tuple[Path, Path]:
-        """The command line and the package versions."""
-        return self.path / "command.txt", self.path / "versions.json"
+    def record_session(self, from_step: int) -> None:
+        """Append this session's command line to ``command.txt``, after a comment line with
+        the time, the step it starts from and the machine: a run resumed many times keeps
+        how each part of it was trained."""
+        from myo_sds.threads import available_cpus
+
+        when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+        with self.command_file.open("a") as file:
+            file.write(f"# {when}, from env step {from_step:,}, {available_cpus()} CPUs ({cpu_model()})\n"
+                       f"{' '.join(sys.argv)}\n")
 
     def looks_like_run(self) -> bool:
         """A run folder, or a model folder exported from one (:meth:`export_model`)."""
@@ -272,7 +298,8 @@ class RunFolder:
     def export_model(self, destination: Path, checkpoint: CheckpointFiles | None = None) -> "RunFolder":
         """A light folder for sharing a policy: the model of ``checkpoint`` (default: the final
         model, else the latest checkpoint) with its optimizer state, its normalization statistics
-        and curriculum state, and the run's config and curriculum; no checkpoints and no logs.
+        and curriculum state, and the run's config, curriculum and provenance (command lines,
+        versions); no checkpoints and no logs. The model card is the caller's to write.
         ``evaluate.py`` and ``train.py --status`` read it like a run folder."""
         import shutil
 
@@ -287,6 +314,9 @@ class RunFolder:
         for source, copy in ((model, target.final_model), (stats, target.final_vecnormalize),
                              (self.config_file, target.config_file), (self.curriculum_file, target.curriculum_file)):
             shutil.copyfile(source, copy)
+        for source, copy in ((self.command_file, target.command_file), (self.versions_file, target.versions_file)):
+            if source.is_file():
+                shutil.copyfile(source, copy)
         # The export has no episode log: keep each stage's start time in the state itself.
         state = CurriculumState.from_json(state_file.read_text())
         walls = state.stage_start_walls(self.read_episodes())[1:]
@@ -333,6 +363,16 @@ class RunFolder:
             except ValueError:
                 continue
         return sorted(steps)
+
+    def newest_policy(self, prefer_final: bool = True) -> tuple[Path, Path]:
+        """(model, normalization statistics): the final model, else (or when not
+        ``prefer_final``) the newest complete checkpoint."""
+        if prefer_final and self.final_model.is_file():
+            return self.final_model, self.final_vecnormalize
+        files = self.latest_checkpoint()
+        if files is None:
+            raise FileNotFoundError(f"{self.path}: no final model and no complete checkpoint yet")
+        return files.model, files.vecnormalize
 
     def latest_checkpoint(self) -> CheckpointFiles | None:
         """The newest checkpoint whose files all exist."""

@@ -214,7 +214,8 @@ def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, cap
 
     assert main(["--export", str(tiny_run.path), "--to", str(tmp_path / "model")]) == 0
     assert sorted(p.name for p in (tmp_path / "model").iterdir()) == [
-        "config.yaml", "curriculum.yaml", "curriculum_state.json", "final_model.zip", "final_vecnormalize.pkl"]
+        "README.md", "command.txt", "config.yaml", "curriculum.yaml", "curriculum_state.json", "final_model.zip",
+        "final_vecnormalize.pkl", "versions.json"]
     exported, original = ev.resolve_checkpoint(tmp_path / "model"), ev.resolve_checkpoint(tiny_run.path)
     for env_name in ("stage:hard", "p1"):
         a = ev.evaluate(exported, ev.choose_env(exported, env_name), episodes=2, seed=7)
@@ -225,5 +226,10 @@ def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, cap
     assert [(s.status, s.env_steps) for s in model_summary.stages] == [(s.status, s.env_steps) for s in run_summary.stages]
     assert [s.wall_s for s in model_summary.stages] == pytest.approx([s.wall_s for s in run_summary.stages])
     assert 0 < model_summary.stages[0].wall_s < model_summary.wall_s
+    # Its model card: each stage's row, and the command lines that trained it.
+    card = (tmp_path / "model" / "README.md").read_text()
+    for s in run_summary.stages:
+        assert f"| {s.index} {s.name} | {s.status} | {s.env_steps:,} | {s.wall_s / 3600:.2f} |" in card
+    assert (tiny_run.path / "command.txt").read_text().strip() in card
     assert main(["--export", str(tmp_path / "nothing"), "--to", str(tmp_path / "x")]) == 2
     assert "not a run folder" in capsys.readouterr().err

@@ -98,6 +98,9 @@ def test_resume_after_sigkill_continues_from_the_last_checkpoint_with_consistent
     assert new and all(row.step > saved.num_timesteps for row in new)  # no orphans from the killed run
     steps = [row.step for row in after]
     assert steps == sorted(steps)
+    # command.txt keeps each session: the start, then the resume from the checkpoint's step.
+    sessions = [line for line in (run / "command.txt").read_text().splitlines() if line.startswith("# ")]
+    assert [line.split(", ")[1] for line in sessions] == ["from env step 0", f"from env step {saved.num_timesteps:,}"]
     assert state.stage_episodes == len(after)  # the curriculum counted exactly the logged episodes
     # TensorBoard shows one curve: the killed run's points after the checkpoint are purged.
     logged = read_scalars(run / "tb", "curriculum/stage_steps")

@@ -38,7 +38,7 @@ def test_two_stage_run_advances_and_records_everything(tiny_run):
     # Every worker env got the stage-2 knobs, in place.
     assert trainer.venv.get_attr("knobs")[0].direction == "ccw"
     assert trainer.venv.get_attr("knobs") == [trainer.config.curriculum.stages[1].distribution] * 2  # read once
-    for path in (folder.config_file, folder.curriculum_file, *folder.provenance_files, folder.episodes_file,
+    for path in (folder.config_file, folder.curriculum_file, folder.command_file, folder.versions_file, folder.episodes_file,
                  folder.final_model, folder.final_vecnormalize):
         assert path.is_file(), path
     assert list(folder.tensorboard_dir.glob("events.out.tfevents.*"))

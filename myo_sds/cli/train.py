@@ -37,6 +37,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--n-envs", type=int, help="same as --set n_envs=N")
     parser.add_argument("--total-steps", type=int,
                         help="same as --set total_steps=N; with --resume, raises the run's step budget")
+    parser.add_argument("--init-from", type=Path, metavar="MODEL",
+                        help="with --config: start from this trained policy (a model or run folder, or a "
+                             "checkpoint .zip): its weights, optimizer state and normalization statistics")
     parser.add_argument("--run-dir", type=Path, help="run folder (default: a new one under output_dir)")
     parser.add_argument("--overwrite", action="store_true", help="replace --run-dir if it exists")
     parser.add_argument("--max-hours", type=float, metavar="H",
@@ -48,6 +51,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     if args.resume and (args.overrides or args.seed is not None or args.n_envs is not None or args.run_dir):
         parser.error("--resume continues a run as configured; only --total-steps, --max-hours and "
                      "--no-progress apply")
+    if args.init_from and not args.config:
+        parser.error("--init-from starts a new run: use it with --config")
     if args.config is not None and not args.config.exists():
         args.config = bundled_path("configs", str(args.config)) or args.config  # else: "file not found"
     for flag, key in (("seed", "seed"), ("n_envs", "n_envs"), ("total_steps", "total_steps")):
@@ -78,6 +83,7 @@ def show_status(run_dir: Path, json_path: Path | None) -> int:
 
 
 def export_model(run_dir: Path, destination: Path, steps: int | None) -> int:
+    from myo_sds.evaluation.model_card import write_model_card
     from myo_sds.run_folder import RunFolder
 
     try:
@@ -86,6 +92,7 @@ def export_model(run_dir: Path, destination: Path, steps: int | None) -> int:
         if checkpoint is not None and not checkpoint.complete():
             raise FileNotFoundError(f"{run_dir}: no complete checkpoint at {steps} steps")
         target = run.export_model(destination, checkpoint)
+        write_model_card(target.path, run.path)
     except FileNotFoundError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
@@ -120,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
                                                total_steps=args.total_steps)
         else:
             trainer = CurriculumTrainer.start(args.config, tuple(args.overrides), args.run_dir,
-                                              args.overwrite, progress=not args.no_progress)
+                                              args.overwrite, progress=not args.no_progress,
+                                              init_from=args.init_from)
     except (ConfigError, FileNotFoundError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

@@ -72,12 +72,11 @@ def resolve_checkpoint(target: str | Path, checkpoint_steps: int | None = None,
             if not files.model.is_file():
                 raise EvaluationError(f"{files.model}: no checkpoint at {checkpoint_steps} steps")
             return CheckpointRef(files.model, files.vecnormalize, run.path)
-        if run.final_model.is_file() and not last_checkpoint:
-            return CheckpointRef(run.final_model, run.final_vecnormalize, run.path)
-        files = run.latest_checkpoint()
-        if files is None:
-            raise EvaluationError(f"{run.path}: no final model and no complete checkpoint yet")
-        return CheckpointRef(files.model, files.vecnormalize, run.path)
+        try:
+            model, statistics = run.newest_policy(prefer_final=not last_checkpoint)
+        except FileNotFoundError as error:
+            raise EvaluationError(str(error)) from None
+        return CheckpointRef(model, statistics, run.path)
     if path.suffix != ".zip":
         raise EvaluationError(f"{path}: expected a run folder or a model .zip")
     run = RunFolder.containing(path.parent)

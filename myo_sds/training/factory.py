@@ -6,6 +6,7 @@ from __future__ import annotations
 import multiprocessing
 import signal
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from myo_sds.curricula.schedule import PpoSettings
@@ -100,6 +101,47 @@ def build_model(config: RunConfig, venv, settings: PpoSettings):
         n_epochs=settings.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=settings.clip_range,
         ent_coef=settings.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm,
         policy_kwargs=policy_kwargs, seed=config.seed, device=config.device, verbose=0)
+
+
+def trained_policy_files(source: Path) -> tuple[Path, Path]:
+    """(model, normalization statistics) of the trained policy that ``--init-from`` names: a
+    model or run folder (its final model, else its newest checkpoint) or a checkpoint ``.zip``."""
+    from myo_sds.curricula.schema import ConfigError
+    from myo_sds.run_folder import RunFolder, statistics_beside
+
+    source = Path(source)
+    try:
+        if source.suffix == ".zip":
+            if not source.is_file():
+                raise FileNotFoundError(f"{source}: no such checkpoint")
+            return source, statistics_beside(source)
+        return RunFolder.require(source).newest_policy()
+    except FileNotFoundError as error:
+        raise ConfigError(f"--init-from: {error}") from None
+
+
+def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
+    """Fine-tuning: give a new ``model`` the weights and optimizer state of a trained policy,
+    and its VecNormalize the policy's normalization moments (this run's normalization
+    settings stay)."""
+    import pickle
+
+    from myo_sds.curricula.schema import ConfigError
+
+    try:
+        model.set_parameters(str(model_file), exact_match=True, device=model.device)
+    except (RuntimeError, ValueError, KeyError) as error:
+        first_line = str(error).strip().splitlines()[0]
+        raise ConfigError(f"--init-from {model_file}: its network does not fit this config's `policy` "
+                          f"settings (lstm_hidden_size, enable_critic_lstm, net_arch, fast_lstm_update): "
+                          f"{first_line}") from None
+    if statistics.is_file():
+        with statistics.open("rb") as file:
+            trained = pickle.load(file)
+        if trained.obs_rms.mean.shape != venv.obs_rms.mean.shape:
+            raise ConfigError(f"--init-from {statistics}: observations of shape {trained.obs_rms.mean.shape}, "
+                              f"this task's are {venv.obs_rms.mean.shape}")
+        venv.obs_rms, venv.ret_rms = trained.obs_rms, trained.ret_rms
 
 
 def apply_ppo_settings(model, settings: PpoSettings) -> None:

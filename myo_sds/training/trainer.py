@@ -43,7 +43,13 @@ from myo_sds.run_folder import (
 )
 from myo_sds.threads import UpdateThreads, available_cpus
 from myo_sds.training.callbacks import EpisodeCollector, UpdateInterrupted
-from myo_sds.training.factory import apply_ppo_settings, build_model, build_training_venv
+from myo_sds.training.factory import (
+    apply_ppo_settings,
+    build_model,
+    build_training_venv,
+    initialize_from,
+    trained_policy_files,
+)
 from myo_sds.training.progress import StageProgressBar
 from myo_sds.training.rollout import LocalRollouts, RolloutCollector, WorkerLost
 
@@ -127,13 +133,15 @@ class CurriculumTrainer:
 
     @classmethod
     def start(cls, config_path: str | Path, overrides: tuple[str, ...] = (), run_dir: Path | None = None,
-              overwrite: bool = False, progress: bool = True) -> "CurriculumTrainer":
-        """Validate the config, create the run folder and a new model at stage 1."""
+              overwrite: bool = False, progress: bool = True, init_from: Path | None = None) -> "CurriculumTrainer":
+        """Validate the config, create the run folder and a new model at stage 1; with
+        ``init_from``, the model starts from that trained policy (fine-tuning)."""
         from stable_baselines3.common.logger import configure
         from stable_baselines3.common.utils import set_random_seed
 
         config_path = Path(config_path)
         config = load_run_config(config_path, overrides)
+        trained = trained_policy_files(init_from) if init_from is not None else None
         if run_dir is None:
             folder = RunFolder.create(config.output_dir, config_path.stem, config.seed)
         else:
@@ -153,6 +161,13 @@ class CurriculumTrainer:
         stage, settings = config.curriculum.stages[0], ppo_settings_at(config, 0, state.stage_starts(), 0)
         venv = build_training_venv(config, stage)
         model = build_model(config, venv, settings)
+        if trained is not None:
+            try:
+                initialize_from(model, venv, *trained)
+            except ConfigError:
+                venv.close()
+                shutil.rmtree(folder.path)  # nothing trained yet: no half-made run folder stays
+                raise
         model.set_logger(configure(str(folder.tensorboard_dir), ["tensorboard"]))
         return cls(config, folder, state, model, _rollouts(config, model, stage, settings), progress)
 
@@ -199,6 +214,7 @@ class CurriculumTrainer:
         tb = str(folder.tensorboard_dir)
         model.set_logger(Logger(tb, [resumed_tensorboard_format(tb, purge_step=state.num_timesteps + 1)]))
         folder.truncate_episodes(state.num_timesteps)
+        folder.record_session(state.num_timesteps)
         return cls(config, folder, state, model, rollouts, progress)
 
     # the loop ----------------------------------------------------------------------------

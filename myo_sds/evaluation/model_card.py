@@ -1,0 +1,61 @@
+"""The model card (README.md) of an exported model folder: where the policy came from, how long
+each stage took on which machine, and how to evaluate or fine-tune it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from myo_sds.evaluation.summary import RunSummary, summarize
+from myo_sds.run_folder import RunFolder
+
+
+def _stage_table(summary: RunSummary) -> list[str]:
+    lines = ["| stage | status | env steps | hours | episodes | measured / threshold |", "|---|---|---|---|---|---|"]
+    for s in summary.stages:
+        measured = "-" if s.measured is None else f"{s.measured:.3f}"
+        target = f"{s.metric} {measured} / {s.threshold}" if s.metric else "no advancement rule"
+        lines.append(f"| {s.index} {s.name} | {s.status} | {s.env_steps:,} | {s.wall_s / 3600:.2f} | "
+                     f"{s.episodes:,} | {target} |")
+    return lines
+
+
+def model_card(model_dir: Path, source_run: Path) -> str:
+    """The card's Markdown for the exported folder ``model_dir`` of the run ``source_run``."""
+    folder = RunFolder(model_dir)
+    summary = summarize(model_dir)
+    current = next((s for s in summary.stages if s.status == "current"), None)
+    where = f"in stage {current.index} ({current.name})" if current else f"run status: {summary.status}"
+    lines = [f"# {folder.path.name}",
+             "",
+             f"RecurrentPPO policy exported from the run `{source_run.name}` at {summary.env_steps:,} env steps "
+             f"({summary.wall_s / 3600:.2f} h of training, {where}), with its optimizer state, its "
+             "normalization statistics and its curriculum state.",
+             "",
+             "## Stages",
+             "",
+             *_stage_table(summary),
+             "",
+             "Measured values are the advancement metric over the stage's last window of training "
+             "episodes (stochastic actions).",
+             "",
+             "## Use it",
+             "",
+             "```bash",
+             f"python evaluate.py {model_dir} --env p1 --official --episodes 200",
+             f"python train.py --config configs/<run>.yaml --init-from {model_dir}   # fine-tune on another curriculum",
+             "```"]
+    if folder.command_file.is_file():
+        lines += ["", "## How it was trained", "",
+                  "Each session of the run (time, first env step, machine) and its command line:", "",
+                  "```", folder.command_file.read_text().rstrip(), "```"]
+    if folder.versions_file.is_file():
+        versions = json.loads(folder.versions_file.read_text())
+        lines += ["", "Packages: " + ", ".join(f"{name} {version}" for name, version in versions.items()) + "."]
+    return "\n".join(lines) + "\n"
+
+
+def write_model_card(model_dir: Path, source_run: Path) -> Path:
+    path = RunFolder(model_dir).model_card
+    path.write_text(model_card(Path(model_dir), Path(source_run)))
+    return path

@@ -1,0 +1,48 @@
+"""Starting a new run from a trained policy (`train.py --config ... --init-from MODEL`)."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+import torch
+from tiny_run import write_config
+
+from myo_sds.curricula.schema import ConfigError
+from myo_sds.training import CurriculumTrainer
+
+
+def test_a_new_run_starts_from_the_trained_weights_optimizer_and_statistics(tiny_run, tmp_path):
+    from myo_sds.cli.train import main
+
+    assert main(["--export", str(tiny_run.path), "--to", str(tmp_path / "model")]) == 0
+    trainer = CurriculumTrainer.start(write_config(tmp_path, total=256), run_dir=tmp_path / "tuned", progress=False,
+                                      init_from=tmp_path / "model")
+    trained = tiny_run.trainer.model
+    for (name, mine), theirs in zip(trainer.model.policy.state_dict().items(), trained.policy.state_dict().values()):
+        assert torch.equal(mine, theirs), name
+    mine, theirs = trainer.model.policy.optimizer.state_dict(), trained.policy.optimizer.state_dict()
+    assert mine["state"].keys() == theirs["state"].keys() and len(mine["state"]) > 0
+    for key, moments in theirs["state"].items():
+        assert torch.equal(mine["state"][key]["exp_avg_sq"], moments["exp_avg_sq"])
+    with (tmp_path / "model" / "final_vecnormalize.pkl").open("rb") as file:
+        statistics = pickle.load(file)
+    assert np.array_equal(trainer.venv.obs_rms.mean, statistics.obs_rms.mean)
+    assert trainer.venv.obs_rms.count == statistics.obs_rms.count > 1000
+    # The new run starts at its own stage 1 and step 0, and trains.
+    state = trainer.run()
+    trainer.close()
+    assert state.num_timesteps == 256 and state.history[0].stage == "easy"
+
+
+def test_init_from_a_policy_of_another_shape_is_one_error_and_leaves_no_folder(tiny_run, tmp_path):
+    config = write_config(tmp_path, total=256)
+    config.write_text(config.read_text().replace("lstm_hidden_size: 16", "lstm_hidden_size: 32"))
+    with pytest.raises(ConfigError, match="does not fit this config's `policy`"):
+        CurriculumTrainer.start(config, run_dir=tmp_path / "tuned", progress=False, init_from=tiny_run.path)
+    assert not (tmp_path / "tuned").exists()
+    with pytest.raises(ConfigError, match="--init-from: .*nothing: not a run folder"):
+        CurriculumTrainer.start(config, run_dir=tmp_path / "tuned", progress=False, init_from=tmp_path / "nothing")
+    with pytest.raises(ConfigError, match="no such checkpoint"):
+        CurriculumTrainer.start(config, run_dir=tmp_path / "tuned", progress=False, init_from=tmp_path / "x.zip")
