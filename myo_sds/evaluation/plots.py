@@ -20,9 +20,11 @@ def trailing_mean(values: np.ndarray, window: int) -> np.ndarray:
     return (sums[index] - sums[start]) / (index - start)
 
 
-def plot_learning_curve(run_dir: Path, path: Path, window: int = 50) -> None:
+def plot_learning_curve(run_dir: Path, path: Path, window: int | None = None) -> None:
     """Score and survival of training episodes against env steps, stage changes marked; below,
-    when the goal's start phase varies, the score of each 45-degree start-phase sector."""
+    when the goal's start phase varies, the score of each 45-degree start-phase sector. The
+    trailing ``window`` defaults to 50 episodes, more on long runs (1/200 of the episodes) so
+    that a curve of millions of steps stays readable."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -32,6 +34,7 @@ def plot_learning_curve(run_dir: Path, path: Path, window: int = 50) -> None:
     if not run.episodes_file.is_file():
         raise EvaluationError(f"{run_dir}: no training episodes logged yet to plot a learning curve from")
     rows = run.read_episodes()
+    window = window or max(50, len(rows) // 200)
     steps = np.array([r.step for r in rows])
     scores = np.array([r.score for r in rows])
     survival = 1.0 - np.array([r.dropped for r in rows], dtype=float)
