@@ -86,6 +86,7 @@ class BaodingEnv(MuscleHandEnv):
         self._init_qpos[:N_HAND_JOINTS] = 0.0
         self._init_qpos[0] = -1.57  # palm up, as the official env
         self._obs = np.zeros(self.OBS_SIZE)
+        self._target_angle = 0.0  # the first target's angle on its orbit at this step
 
     def sample_task(self, rng: np.random.Generator) -> BaodingTask:
         """Draw a task instance from the current knobs (draw order: module docstring)."""
@@ -131,6 +132,9 @@ class BaodingEnv(MuscleHandEnv):
     def _episode_start_phase(self) -> float:
         return float(self.task.start_angle % (2 * np.pi))
 
+    def _goal_phase(self) -> float:
+        return self._target_angle  # of the targets this step was solved against
+
     def _camera_target(self) -> np.ndarray:
         return self.data.site_xpos[list(self._target_sites)].mean(axis=0)
 
@@ -143,6 +147,7 @@ class BaodingEnv(MuscleHandEnv):
         # Same float operations as the official precomputed trajectory.
         angle = 0.0 if math.isinf(task.period) else sign * 2 * np.pi * (counter * self.dt / task.period)
         site_pos = self.model.site_pos
+        self._target_angle = float(angle + task.start_angle)
         for site, start in zip(self._target_sites, (task.start_angle, task.start_angle - np.pi)):
             site_pos[site, 0] = task.x_radius * np.cos(angle + start) + ORBIT_CENTER[0]
             site_pos[site, 1] = task.y_radius * np.sin(angle + start) + ORBIT_CENTER[1]

@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 from myo_sds.envs.assets import load_hand_model
 from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs, check_known
-from myo_sds.envs.metrics import EpisodeResult
+from myo_sds.envs.metrics import PHASE_SECTORS, EpisodeResult, phase_sector
 
 _INSTABILITY_WARNINGS = np.array([mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
                                   mujoco.mjtWarning.mjWARN_BADQACC], dtype=int)
@@ -123,6 +123,10 @@ class MuscleHandEnv(gym.Env):
         """Where on its path the episode's goal starts, for reports by start phase."""
         return None
 
+    def _goal_phase(self) -> float | None:
+        """Where on its path the goal is at this step (rad), for reports by goal phase."""
+        return None
+
     # -- distribution -------------------------------------------------------------------
 
     def configure(self, preset: str | None = None, *, distribution: TaskKnobs | None = None, **knobs: Any) -> None:
@@ -166,7 +170,8 @@ class MuscleHandEnv(gym.Env):
             self._set_state(state)
         # The observation needs positions only; mj_step computes everything else itself.
         mujoco.mj_kinematics(self.model, self.data)
-        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "length": 0}
+        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "length": 0,
+                         "phase_steps": [0] * PHASE_SECTORS, "phase_solved": [0] * PHASE_SECTORS}
         return self._observe().astype(np.float32), {"task": task}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -206,13 +211,26 @@ class MuscleHandEnv(gym.Env):
         episode["length"] += 1
         episode["solved_steps"] += int(terms["solved"])
         episode["effort_sum"] -= terms["act_reg"]
+        phase = self._goal_phase()
+        if phase is not None:
+            sector = phase_sector(phase)
+            episode["phase_steps"][sector] += 1
+            episode["phase_solved"][sector] += int(terms["solved"])
         info: dict[str, Any] = {**terms, "dropped": bool(terms["done"]), "unstable": unstable, "task": self.task}
         if terminated or truncated:
             info["episode_result"] = EpisodeResult(
                 solved_steps=episode["solved_steps"], length=episode["length"], horizon=self.horizon,
                 dropped=bool(terms["done"]), effort=episode["effort_sum"] / episode["length"],
-                direction=self._episode_label(), task=self.TASK_NAME, start_phase=self._episode_start_phase())
+                direction=self._episode_label(), task=self.TASK_NAME, start_phase=self._episode_start_phase(),
+                **self._phase_counts(episode))
         return obs, reward, terminated, truncated, info
+
+    @staticmethod
+    def _phase_counts(episode: dict[str, Any]) -> dict[str, tuple[int, ...] | None]:
+        if not any(episode["phase_steps"]):
+            return {}
+        return {"steps_by_target_phase": tuple(episode["phase_steps"]),
+                "solved_by_target_phase": tuple(episode["phase_solved"])}
 
     def render(self) -> np.ndarray | None:
         """An RGB frame (480 x 640) when ``render_mode == "rgb_array"``.

@@ -16,6 +16,20 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 DIE_SUCCESS_STEPS = 5  # a die episode succeeds when solved on more steps than this
+PHASE_SECTOR_DEG = 45  # Baoding phases (the targets' angle on their orbit) are reported in sectors this wide
+PHASE_SECTORS = 360 // PHASE_SECTOR_DEG
+
+
+def phase_sector(phase: float) -> int:
+    """Index of the 45-degree sector holding a phase in radians (any value; taken mod 2 pi)."""
+    if not 0.0 <= phase <= 2 * math.pi:
+        phase %= 2 * math.pi
+    # min(): a phase that rounds to exactly 2 pi belongs to the last sector
+    return min(int(math.degrees(phase) // PHASE_SECTOR_DEG), PHASE_SECTORS - 1)
+
+
+def sector_name(index: int) -> str:
+    return f"{index * PHASE_SECTOR_DEG}-{(index + 1) * PHASE_SECTOR_DEG}"
 
 
 @dataclass(frozen=True)
@@ -30,6 +44,10 @@ class EpisodeResult:
     direction: str | None = None  # Baoding: hold, cw or ccw
     task: str = "baoding"
     start_phase: float | None = None  # Baoding: the targets' start angle on their orbit, rad in [0, 2 pi)
+    # Baoding: per phase sector of the first target, the steps spent there and the solved ones:
+    # which part of the orbit a policy fails to carry the balls through.
+    steps_by_target_phase: tuple[int, ...] | None = None
+    solved_by_target_phase: tuple[int, ...] | None = None
 
     @property
     def score(self) -> float:

@@ -321,3 +321,24 @@ def test_an_env_takes_knobs_already_read_and_nothing_else_with_them():
         BaodingEnv(distribution=DieKnobs.parse())
     with pytest.raises(ValueError, match="got BaodingKnobs and direction"):
         env.configure(distribution=hold, direction="cw")
+
+
+def test_episode_counts_its_steps_and_solved_steps_by_where_the_targets_are():
+    from collections import Counter
+
+    from myo_sds.envs.metrics import phase_sector
+
+    for direction, sign in (("ccw", 1), ("cw", -1)):
+        env = BaodingEnv(direction=direction, period=5.0, start_angle=0.3, rsi_probability=1.0, drop_height=-10.0)
+        env.reset(seed=0)
+        while True:
+            _, _, terminated, truncated, info = env.step(np.zeros(39, np.float32))
+            if terminated or truncated:
+                break
+        result = info["episode_result"]
+        # Step k is solved against the targets at 0.3 + sign * 2 pi * k * dt / 5: one revolution in 200 steps.
+        expected = Counter(phase_sector(0.3 + sign * 2 * math.pi * k * env.dt / 5.0) for k in range(result.length))
+        assert result.steps_by_target_phase == tuple(expected[s] for s in range(8))
+        assert min(result.steps_by_target_phase) >= 24 and sum(result.steps_by_target_phase) == result.length == 200
+        assert sum(result.solved_by_target_phase) == result.solved_steps > 0
+        assert all(s <= n for s, n in zip(result.solved_by_target_phase, result.steps_by_target_phase))

@@ -57,6 +57,15 @@ def test_evaluation_reports_official_metrics(run_dir):
     table = ev.format_table([report])
     for name, sector in sectors.items():
         assert f"score, start {name} deg" in table and f"(n={sector['episodes']}, drops" in table
+    # A hold stage: each episode's targets stay in its start sector, so by target phase the
+    # steps and solved steps are those of the episodes that started there.
+    for name, sector in summary["per_target_phase"].items():
+        low, high = (float(v) for v in name.split("-"))
+        inside = [e for e in summary["per_episode"] if low <= np.degrees(e["start_phase"]) < high]
+        assert sector["steps"] == sum(e["length"] for e in inside)
+        assert sector["solved_fraction"] == pytest.approx(sum(e["solved_steps"] for e in inside) / sector["steps"])
+        assert f"solved, targets at {name} deg" in table
+    assert sum(s["steps"] for s in summary["per_target_phase"].values()) == sum(e["length"] for e in summary["per_episode"])
     # Deterministic: the same seeds give the same numbers, with or without worker processes.
     again = ev.evaluate(ref, ev.choose_env(ref, "stage:easy"), episodes=4, seed=3, workers=2)
     assert again.summary()["per_episode"] == summary["per_episode"]

@@ -45,3 +45,20 @@ def test_scores_by_start_phase_sector():
     # One start phase for all episodes (P1's fixed start), or none recorded: no breakdown.
     assert per_start_phase([episode(45, 10), episode(45, 20)]) == {}
     assert per_start_phase([EpisodeResult(10, 200, 200, False, 0.1)]) == {}
+
+
+def test_solved_fraction_by_target_phase_sums_over_episodes():
+    from myo_sds.evaluation import per_target_phase
+
+    def episode(steps, solved):
+        return EpisodeResult(sum(solved), sum(steps), 200, False, 0.1, "ccw",
+                             steps_by_target_phase=tuple(steps), solved_by_target_phase=tuple(solved))
+
+    a = episode([25, 25, 25, 25, 25, 25, 25, 25], [25, 20, 0, 0, 5, 25, 25, 25])
+    b = episode([0, 0, 10, 40, 0, 0, 0, 0], [0, 0, 10, 10, 0, 0, 0, 0])  # dropped after 50 steps
+    sectors = per_target_phase([a, b, EpisodeResult(5, 10, 200, True, 0.1)])  # one without phases
+    assert sectors["0-45"] == {"steps": 25, "solved_fraction": 1.0}
+    assert sectors["90-135"] == {"steps": 35, "solved_fraction": pytest.approx(10 / 35)}
+    assert sectors["135-180"] == {"steps": 65, "solved_fraction": pytest.approx(10 / 65)}
+    assert len(sectors) == 8
+    assert per_target_phase([EpisodeResult(5, 10, 200, True, 0.1)]) == {}

@@ -13,13 +13,13 @@ from myo_sds.evaluation.checkpoints import (
     resolve_checkpoint,
     run_task,
 )
+from myo_sds.envs.metrics import phase_sector, sector_name
 from myo_sds.evaluation.episodes import (
     EvaluationReport,
     evaluate,
     per_start_phase,
-    phase_sector,
+    per_target_phase,
     run_episode,
-    sector_name,
 )
 from myo_sds.evaluation.plots import (
     plot_learning_curve,
@@ -31,7 +31,7 @@ from myo_sds.evaluation.table import format_table
 from myo_sds.evaluation.video import chosen_episodes, record_video
 
 __all__ = ["OFFICIAL_IDS", "CheckpointRef", "EnvChoice", "EvaluationError", "EvaluationReport", "LoadedPolicy",
-           "choose_env", "chosen_episodes", "evaluate", "format_table", "load_policy", "per_start_phase",
+           "choose_env", "chosen_episodes", "evaluate", "format_table", "load_policy", "per_start_phase", "per_target_phase",
            "phase_sector", "plot_learning_curve", "plot_score_histogram", "record_video", "resolve_checkpoint",
            "run_episode", "run_task", "sector_name", "trailing_mean", "RunSummary", "StageSummary", "format_summary",
            "summarize"]

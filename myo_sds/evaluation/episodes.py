@@ -16,11 +16,14 @@ from typing import Any
 import numpy as np
 
 from myo_sds.envs.metrics import (
+    PHASE_SECTORS,
     EpisodeResult,
     drop_rate,
     mean_confidence_interval,
     mean_effort,
     official_score,
+    phase_sector,
+    sector_name,
 )
 from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.evaluation.checkpoints import (
@@ -64,11 +67,9 @@ class EvaluationReport:
             "mean_length": float(np.mean([e.length for e in self.episodes])) if self.episodes else math.nan,
             "per_direction": per_direction,
             "per_start_phase": per_start_phase(self.episodes),
+            "per_target_phase": per_target_phase(self.episodes),
             "per_episode": [e.to_dict() for e in self.episodes],
         }
-
-
-PHASE_SECTOR_DEG = 45
 
 
 def per_start_phase(episodes: Sequence[EpisodeResult | EpisodeRecord]) -> dict[str, dict[str, Any]]:
@@ -89,15 +90,18 @@ def per_start_phase(episodes: Sequence[EpisodeResult | EpisodeRecord]) -> dict[s
             for k, members in sorted(sectors.items())}
 
 
-def phase_sector(phase: float) -> int:
-    """Index of the 45-degree sector holding a start phase in radians [0, 2 pi)."""
-    # min(): a phase that rounds to exactly 2 pi belongs to the last sector
-    return min(int(math.degrees(phase) // PHASE_SECTOR_DEG), 360 // PHASE_SECTOR_DEG - 1)
-
-
-def sector_name(index: int) -> str:
-    return f"{index * PHASE_SECTOR_DEG}-{(index + 1) * PHASE_SECTOR_DEG}"
-
+def per_target_phase(episodes: Sequence[EpisodeResult]) -> dict[str, dict[str, Any]]:
+    """The fraction of steps solved while the first target was in each 45-degree phase sector,
+    over all episodes (steps after a drop are not counted). A policy that carries the balls
+    along most of the orbit but loses them at one part shows a low sector there; empty when
+    the env does not report target phases (the official env, the die)."""
+    counted = [e for e in episodes if e.steps_by_target_phase is not None]
+    if not counted:
+        return {}
+    steps = np.sum([e.steps_by_target_phase for e in counted], axis=0)
+    solved = np.sum([e.solved_by_target_phase for e in counted], axis=0)
+    return {sector_name(k): {"steps": int(steps[k]), "solved_fraction": float(solved[k] / steps[k])}
+            for k in range(PHASE_SECTORS) if steps[k] > 0}
 
 
 def make_env(choice: EnvChoice, render: bool = False):

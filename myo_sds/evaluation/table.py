@@ -28,6 +28,10 @@ def format_table(reports: Sequence[EvaluationReport]) -> str:
     for sector in sectors:
         rows.append((f"score, start {sector} deg", breakdown(
             "per_start_phase", sector, lambda d: f"{d['score']:.3f} (n={d['episodes']}, drops {d['drop_rate']:.0%})")))
+    sectors = sorted({k for s in summaries for k in s["per_target_phase"]}, key=lambda k: int(k.split("-")[0]))
+    for sector in sectors:
+        rows.append((f"solved, targets at {sector} deg", breakdown(
+            "per_target_phase", sector, lambda d: f"{d['solved_fraction']:.3f} ({d['steps']} steps)")))
     width = max(len(name) for name, _ in rows)
     col_width = [max(len(c), *(len(cells[i]) for _, cells in rows)) for i, c in enumerate(columns)]
     lines = [" " * width + "  " + "  ".join(c.ljust(w) for c, w in zip(columns, col_width))]
