@@ -71,7 +71,9 @@ class Transition:
     stage_steps: int
     stage_episodes: int
     measured: float  # the advancement metric over the stage's window
-    wall_s: float | None = None  # the run's training wall time then; None in states written before it was kept
+    # The run's training wall time then (None in states written before it was kept). Not part of
+    # equality: two runs with the same schedule differ in timing.
+    wall_s: float | None = field(default=None, compare=False)
 
 
 @dataclass
