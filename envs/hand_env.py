@@ -226,7 +226,8 @@ class MuscleHandEnv(gym.Env):
         return obs, reward, terminated, truncated, info
 
     @staticmethod
-    def _phase_counts(episode: dict[str, Any]) -> dict[str, tuple[int, ...] | None]:
+    def _phase_counts(episode: dict[str, Any]) -> dict[str, tuple[int, ...]]:
+        """The episode's counts by goal phase, for ``EpisodeResult``; none for tasks without phases."""
         if not any(episode["phase_steps"]):
             return {}
         return {"steps_by_target_phase": tuple(episode["phase_steps"]),

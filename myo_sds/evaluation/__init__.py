@@ -31,7 +31,7 @@ from myo_sds.evaluation.table import format_table
 from myo_sds.evaluation.video import chosen_episodes, record_video
 
 __all__ = ["OFFICIAL_IDS", "CheckpointRef", "EnvChoice", "EvaluationError", "EvaluationReport", "LoadedPolicy",
-           "choose_env", "chosen_episodes", "evaluate", "format_table", "load_policy", "per_start_phase", "per_target_phase",
-           "phase_sector", "plot_learning_curve", "plot_score_histogram", "record_video", "resolve_checkpoint",
+           "choose_env", "chosen_episodes", "evaluate", "format_table", "load_policy", "per_start_phase",
+           "per_target_phase", "phase_sector", "plot_learning_curve", "plot_score_histogram", "record_video", "resolve_checkpoint",
            "run_episode", "run_task", "sector_name", "trailing_mean", "RunSummary", "StageSummary", "format_summary",
            "summarize"]

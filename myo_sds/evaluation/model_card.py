@@ -6,18 +6,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from myo_sds.evaluation.summary import RunSummary, summarize
+from myo_sds.evaluation.summary import RunSummary, stage_rows, summarize
 from myo_sds.run_folder import RunFolder
 
 
 def _stage_table(summary: RunSummary) -> list[str]:
-    lines = ["| stage | status | env steps | hours | episodes | measured / threshold |", "|---|---|---|---|---|---|"]
-    for s in summary.stages:
-        measured = "-" if s.measured is None else f"{s.measured:.3f}"
-        target = f"{s.metric} {measured} / {s.threshold}" if s.metric else "no advancement rule"
-        lines.append(f"| {s.index} {s.name} | {s.status} | {s.env_steps:,} | {s.wall_s / 3600:.2f} | "
-                     f"{s.episodes:,} | {target} |")
-    return lines
+    header, rows = stage_rows(summary)
+    return ["| " + " | ".join(row) + " |" for row in (header, tuple("---" for _ in header), *rows)]
 
 
 def model_card(model_dir: Path, source_run: Path) -> str:

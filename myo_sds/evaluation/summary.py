@@ -96,17 +96,25 @@ def _steps(step: int) -> str:
     return f"{step / 1e6:.2f}M" if step >= 1_000_000 else f"{step:,}"
 
 
-def format_summary(summary: RunSummary) -> str:
-    """The summary as a table a person reads at a glance."""
-    lines = [f"{summary.run_dir}: {summary.status}, {summary.env_steps:,} env steps, "
-             f"{summary.wall_s / 3600:.2f} h of training"]
-    header = ("stage", "status", "env steps", "hours", "episodes", "measured / threshold")
+STAGE_COLUMNS = ("stage", "status", "env steps", "hours", "episodes", "measured / threshold")
+
+
+def stage_rows(summary: RunSummary) -> tuple[tuple[str, ...], list[tuple[str, ...]]]:
+    """The stage table's header and one row of text per stage (``--status`` and model cards)."""
     rows = []
     for s in summary.stages:
         target = (f"{s.metric} {'-' if s.measured is None else f'{s.measured:.3f}'} / {s.threshold}"
                   if s.metric else "no advancement rule")
         rows.append((f"{s.index} {s.name}", s.status, f"{s.env_steps:,}", f"{s.wall_s / 3600:.2f}", f"{s.episodes:,}",
                      target))
+    return STAGE_COLUMNS, rows
+
+
+def format_summary(summary: RunSummary) -> str:
+    """The summary as a table a person reads at a glance."""
+    lines = [f"{summary.run_dir}: {summary.status}, {summary.env_steps:,} env steps, "
+             f"{summary.wall_s / 3600:.2f} h of training"]
+    header, rows = stage_rows(summary)
     widths = [max(len(str(r[i])) for r in (header, *rows)) for i in range(len(header))]
     for row in (header, *rows):
         lines.append("  ".join(str(v).ljust(w) for v, w in zip(row, widths)).rstrip())
