@@ -15,6 +15,7 @@ import pytest
 from tiny_run import write_config
 
 from myo_sds import evaluation as ev
+from myo_sds.run_folder import RunFolder
 from myo_sds.training import CurriculumTrainer
 
 REPO = Path(__file__).resolve().parents[1]
@@ -216,6 +217,25 @@ def test_run_summary_gives_each_stage_its_steps_time_and_measured_value(tiny_run
     assert "1 easy  passed" in printed and f"score {second.measured:.3f} / 0.9" in printed
     assert f"stage 2, its last {len(rows):,} episodes by the targets' start phase:" in printed
     assert json.loads((tmp_path / "s.json").read_text())["stages"][1]["trend"][-1][1] == pytest.approx(second.measured)
+
+
+def test_run_summary_dates_a_running_status_by_its_last_checkpoint(tiny_run, tmp_path):
+    # A run killed without warning still reads "running": the summary says how old that news is.
+    import shutil
+
+    copy = tmp_path / "run"
+    shutil.copytree(tiny_run.path, copy)
+    state_file = RunFolder(copy).state_file
+    state = json.loads(state_file.read_text())
+    state["status"] = "running"
+    state_file.write_text(json.dumps(state))
+    saved_at = 1_796_000_000.0  # 2026-11-30 00:53:20 UTC
+    os.utime(state_file, (saved_at, saved_at))
+    summary = ev.summarize(copy)
+    assert summary.saved_at == saved_at
+    first_line = ev.format_summary(summary, now=saved_at + 25 * 60).splitlines()[0]
+    assert first_line.startswith(f"{copy}: running as of its last checkpoint (2026-11-30 00:53 UTC, 25 min ago), ")
+    assert ev.format_summary(ev.summarize(tiny_run.path)).splitlines()[0].startswith(f"{tiny_run.path}: budget_reached, ")
 
 
 def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, capsys):

@@ -4,6 +4,7 @@ spent, the measured value against the threshold, and how the current stage is tr
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,9 @@ class RunSummary:
     env_steps: int
     wall_s: float
     stages: list[StageSummary]
+    # When the state above was written (Unix time). A process killed without warning leaves
+    # "running" behind, so the age of its last checkpoint is what tells a live run from a dead one.
+    saved_at: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -89,7 +93,8 @@ def summarize(run_dir: str | Path) -> RunSummary:
                         base.trend.append((int(mark), float(upto.mean())))
             base.by_start_phase = per_start_phase(in_stage[-BREAKDOWN_EPISODES:])
         stages.append(base)
-    return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages)
+    return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages,
+                      folder.state_file.stat().st_mtime)
 
 
 def _steps(step: int) -> str:
@@ -110,10 +115,17 @@ def stage_rows(summary: RunSummary) -> tuple[tuple[str, ...], list[tuple[str, ..
     return STAGE_COLUMNS, rows
 
 
-def format_summary(summary: RunSummary) -> str:
-    """The summary as a table a person reads at a glance."""
-    lines = [f"{summary.run_dir}: {summary.status}, {summary.env_steps:,} env steps, "
-             f"{summary.wall_s / 3600:.2f} h of training"]
+def _status_line(summary: RunSummary, now: float) -> str:
+    status = summary.status
+    if status == "running" and summary.saved_at is not None:
+        saved = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(summary.saved_at))
+        status = f"running as of its last checkpoint ({saved}, {max(0.0, now - summary.saved_at) / 60:.0f} min ago)"
+    return f"{summary.run_dir}: {status}, {summary.env_steps:,} env steps, {summary.wall_s / 3600:.2f} h of training"
+
+
+def format_summary(summary: RunSummary, now: float | None = None) -> str:
+    """The summary as a table a person reads at a glance (``now``: Unix time, for the checkpoint's age)."""
+    lines = [_status_line(summary, time.time() if now is None else now)]
     header, rows = stage_rows(summary)
     widths = [max(len(str(r[i])) for r in (header, *rows)) for i in range(len(header))]
     for row in (header, *rows):
