@@ -236,6 +236,8 @@ def test_run_summary_dates_a_running_status_by_its_last_checkpoint(tiny_run, tmp
     first_line = ev.format_summary(summary, now=saved_at + 25 * 60).splitlines()[0]
     assert first_line.startswith(f"{copy}: running as of its last checkpoint (2026-11-30 00:53 UTC, 25 min ago), ")
     assert ev.format_summary(ev.summarize(tiny_run.path)).splitlines()[0].startswith(f"{tiny_run.path}: budget_reached, ")
+    shutil.rmtree(copy / "checkpoints")  # what an exported model folder looks like
+    assert ev.format_summary(ev.summarize(copy)).splitlines()[0].startswith(f"{copy}: exported while its run was running, ")
 
 
 def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, capsys):

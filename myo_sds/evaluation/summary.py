@@ -93,8 +93,9 @@ def summarize(run_dir: str | Path) -> RunSummary:
                         base.trend.append((int(mark), float(upto.mean())))
             base.by_start_phase = per_start_phase(in_stage[-BREAKDOWN_EPISODES:])
         stages.append(base)
-    return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages,
-                      folder.state_file.stat().st_mtime)
+    # An exported model (no checkpoints of its own) is a snapshot: its file times say nothing.
+    saved_at = folder.state_file.stat().st_mtime if folder.checkpoint_dir.is_dir() else None
+    return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages, saved_at)
 
 
 def _steps(step: int) -> str:
@@ -117,7 +118,9 @@ def stage_rows(summary: RunSummary) -> tuple[tuple[str, ...], list[tuple[str, ..
 
 def _status_line(summary: RunSummary, now: float) -> str:
     status = summary.status
-    if status == "running" and summary.saved_at is not None:
+    if status == "running" and summary.saved_at is None:
+        status = "exported while its run was running"
+    elif status == "running":
         saved = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(summary.saved_at))
         status = f"running as of its last checkpoint ({saved}, {max(0.0, now - summary.saved_at) / 60:.0f} min ago)"
     return f"{summary.run_dir}: {status}, {summary.env_steps:,} env steps, {summary.wall_s / 3600:.2f} h of training"
