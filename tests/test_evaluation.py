@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -221,8 +222,6 @@ def test_run_summary_gives_each_stage_its_steps_time_and_measured_value(tiny_run
 
 def test_run_summary_dates_a_running_status_by_its_last_checkpoint(tiny_run, tmp_path):
     # A run killed without warning still reads "running": the summary says how old that news is.
-    import shutil
-
     copy = tmp_path / "run"
     shutil.copytree(tiny_run.path, copy)
     state_file = RunFolder(copy).state_file
