@@ -210,8 +210,9 @@ def _dataclass_from(reader: YamlReader, key: str, raw: Any, cls: type, defaults:
     for name, value in raw.items():
         path, default = f"{key}.{name}", getattr(base, name)
         if name == "net_arch":
-            if not isinstance(value, (list, tuple)) or not value:
-                raise reader.error(path, f"expected a list of layer sizes, got {value!r}")
+            # []: the LSTMs feed the action and value heads directly (the 2022 phase-1 network).
+            if not isinstance(value, (list, tuple)):
+                raise reader.error(path, f"expected a list of layer sizes ([] for none), got {value!r}")
             values[name] = tuple(reader.number(f"{path}[{i}]", v, integer=True, low=1) for i, v in enumerate(value))
         elif name == "activation":
             values[name] = reader.choice(path, value, ACTIVATIONS)

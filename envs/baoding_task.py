@@ -116,6 +116,9 @@ class BaodingKnobs(TaskKnobs):
     KIND: ClassVar[str] = "Baoding knob"
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
         "p1": {},
+        # Phase 1 as the 2022 leaderboard scored it (myosuite <= 1.2.2): the targets start on
+        # the resting balls; MyoSuite 3.0.0's P1 starts them 90 degrees behind.
+        "p1_2022": {"start_angle": "on_balls"},
         "p2": {
             "direction": "random",
             "period": [4.0, 6.0],

@@ -77,8 +77,14 @@ POLICY_MODULES = ("myo_sds.policy", "curricula.policy")
 def load_model(path: str | Path, **kwargs: Any):
     """``RecurrentPPO.load`` that also reads checkpoints saved before the policy class moved:
     where the archive names :class:`SequenceLstmPolicy` under an older module path, the class
-    is handed to SB3 instead of unpickled."""
+    is handed to SB3 instead of unpickled. An archive saved by SB3 1.x under gym (a published
+    2022 policy) loads as a :class:`SequenceLstmPolicy` of the same parameters."""
     from sb3_contrib import RecurrentPPO
+
+    from myo_sds.published import load_gym_era_model, saved_with_gym
+
+    if saved_with_gym(Path(path)):
+        return load_gym_era_model(Path(path), SequenceLstmPolicy, device=kwargs.get("device", "cpu"))
 
     custom_objects = dict(kwargs.pop("custom_objects", None) or {})
     try:

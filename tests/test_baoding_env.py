@@ -229,7 +229,7 @@ def test_bad_knobs_name_the_problem(knobs, message):
 
 
 def test_unknown_preset_lists_allowed():
-    with pytest.raises(ValueError, match="p3.*not one of p1, p2"):
+    with pytest.raises(ValueError, match="p3.*not one of p1, p1_2022, p2"):
         BaodingEnv("p3")
 
 

@@ -120,7 +120,7 @@ def test_run_config_errors(tmp_path):
         good + "n_env: 4\n": "n_env: unknown key (did you mean 'n_envs'?)",
         good + "vec_env: threads\n": "vec_env: 'threads' is not one of thread, dummy, subproc",
         good + "policy: {activation: swish}\n": "policy.activation: 'swish' is not one of relu",
-        good + "policy: {net_arch: 256}\n": "policy.net_arch: expected a list of layer sizes",
+        good + "policy: {net_arch: 256}\n": "policy.net_arch: expected a list of layer sizes ([] for none)",
         good + "normalize: {observations: yes please}\n": "normalize.observations: expected true or false",
         "seed: 1\n": "curriculum: missing",
         good.replace("batch_size: 64", "batch_size: 512"): "ppo.batch_size: 512 exceeds the rollout size",

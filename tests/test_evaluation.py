@@ -150,7 +150,7 @@ def test_bad_input_gives_clear_errors(run_dir, tmp_path, capsys):
     code, err = run_cli(capsys, str(corrupt))
     assert code == 2 and "cannot load this checkpoint" in err
     code, err = run_cli(capsys, str(run_dir), "--env", "p3")
-    assert code == 2 and "expected p1, p2 or stage:NAME" in err
+    assert code == 2 and "expected one of p1, p1_2022, p2 or stage:NAME" in err
     code, err = run_cli(capsys, str(run_dir), "--env", "stage:spin")
     assert code == 2 and "no stage named 'spin'" in err
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import pickle
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -12,10 +12,19 @@ import numpy as np
 from myo_sds.curricula.schema import load_curriculum
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
+from myo_sds.published import archive_spaces, load_statistics, published_files
 from myo_sds.run_folder import RunFolder, statistics_beside
 
-OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p2"): "myoChallengeBaodingP2-v1",
+OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p1_2022"): "myoChallengeBaodingP1-v1",
+                ("baoding", "p2"): "myoChallengeBaodingP2-v1",
                 ("die", "p1"): "myoChallengeDieReorientP1-v0", ("die", "p2"): "myoChallengeDieReorientP2-v0"}
+# The 2022 phase-1 start on MyoSuite 3.0.0's P1 env: its ball_1/ball_2 starting angles, set before
+# reset (myosuite <= 1.2.2 started the targets there, on the resting balls).
+OFFICIAL_START_ANGLES = {("baoding", "p1_2022"): (3 * math.pi / 4, -math.pi / 4)}
+# What each preset's start is, for the printed table and the JSON.
+START_NOTES = {"p1": "targets start at pi/4, 90 deg behind the balls (MyoSuite 3.0.0)",
+               "p1_2022": "targets start at 3pi/4, on the resting balls (the 2022 phase-1 leaderboard)",
+               "p2": "random start angle (P2)"}
 _OFFICIAL_DIRECTIONS = ("hold", "cw", "ccw")  # myosuite's Task enum values 0, 1, 2
 
 
@@ -63,10 +72,13 @@ def resolve_checkpoint(target: str | Path, checkpoint_steps: int | None = None,
     if not path.exists():
         raise EvaluationError(f"{path}: no such run folder or checkpoint")
     if path.is_dir():
-        try:
-            run = RunFolder.require(path)
-        except FileNotFoundError as error:
-            raise EvaluationError(str(error)) from None
+        run = RunFolder.containing(path)
+        if run is None:  # a policy as its authors published it: one .zip and one .pkl
+            try:
+                model, statistics = published_files(path)
+            except FileNotFoundError as error:
+                raise EvaluationError(str(error)) from None
+            return CheckpointRef(model, statistics, None)
         if checkpoint_steps is not None:
             files = run.checkpoint(checkpoint_steps)
             if not files.model.is_file():
@@ -116,8 +128,7 @@ def load_policy(ref: CheckpointRef, task: str) -> LoadedPolicy:
     normalizer = None
     if ref.vecnormalize.is_file():
         try:
-            with ref.vecnormalize.open("rb") as file:
-                normalizer = pickle.load(file)
+            normalizer = load_statistics(ref.vecnormalize)
         except Exception as error:
             raise EvaluationError(f"{ref.vecnormalize}: cannot read normalization statistics ({error})") from None
         normalizer.training = False  # evaluation never updates the statistics
@@ -132,27 +143,29 @@ def run_task(ref: CheckpointRef) -> str:
     """The task a checkpoint was trained on: from its run folder, else from its observation size."""
     if ref.run_dir is not None:
         return load_curriculum(RunFolder(ref.run_dir).curriculum_file).task
-    from stable_baselines3.common.save_util import load_from_zip_file
-
     try:
-        data, _, _ = load_from_zip_file(ref.model, load_data=True, device="cpu")
-        shape = data["observation_space"].shape
-    except Exception:  # load_policy reports an unreadable checkpoint with a clear message
-        return "baoding"
+        shape = archive_spaces(ref.model)[0].shape
+    except Exception as error:
+        raise EvaluationError(f"{ref.model}: cannot load this checkpoint ({type(error).__name__}: {error}); "
+                              "it is not a complete RecurrentPPO model archive") from None
     for name, spec in TASK_SPECS.items():
         if shape == (spec.env_class().OBS_SIZE,):
             return name
-    return "baoding"
+    raise EvaluationError(f"{ref.model}: the policy takes observations of shape {shape}: it was trained on another "
+                          f"task than these ({', '.join(f'{n}: ({s.env_class().OBS_SIZE},)' for n, s in TASK_SPECS.items())})")
 
 
 def choose_env(ref: CheckpointRef, name: str, official: bool = False) -> EnvChoice:
-    """Parse ``p1``, ``p2`` or ``stage:NAME`` (a stage of the checkpoint's own curriculum)."""
+    """Parse a preset (``p1``, ``p1_2022``, ``p2``) or ``stage:NAME`` (a stage of the checkpoint's
+    own curriculum)."""
     task = run_task(ref)
-    if name in ("p1", "p2"):
+    presets = TASK_SPECS[task].knobs.PRESETS
+    if name in presets:
         choice = EnvChoice(task, name, TASK_SPECS[task].knobs.parse(name), official)
     elif name.startswith("stage:"):
         if official:
-            raise EvaluationError(f"--env {name}: the official env has only the p1 and p2 tasks")
+            raise EvaluationError(f"--env {name}: the official env has only the presets' tasks "
+                                  f"({', '.join(presets)})")
         if ref.run_dir is None:
             raise EvaluationError(f"--env {name}: {ref.model} is not inside a run folder, so it has no curriculum")
         curriculum = load_curriculum(RunFolder(ref.run_dir).curriculum_file)
@@ -162,7 +175,7 @@ def choose_env(ref: CheckpointRef, name: str, official: bool = False) -> EnvChoi
             raise EvaluationError(f"--env {name}: {error.args[0]}") from None
         choice = EnvChoice(task, name, stage.distribution, official)
     else:
-        raise EvaluationError(f"--env {name!r}: expected p1, p2 or stage:NAME")
+        raise EvaluationError(f"--env {name!r}: expected one of {', '.join(presets)} or stage:NAME")
     if official and (task, name) not in OFFICIAL_IDS:
         raise EvaluationError(f"no official env for {task} {name}")
     return choice

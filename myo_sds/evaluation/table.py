@@ -36,4 +36,6 @@ def format_table(reports: Sequence[EvaluationReport]) -> str:
     col_width = [max(len(c), *(len(cells[i]) for _, cells in rows)) for i, c in enumerate(columns)]
     lines = [" " * width + "  " + "  ".join(c.ljust(w) for c, w in zip(columns, col_width))]
     lines += [name.ljust(width) + "  " + "  ".join(v.ljust(w) for v, w in zip(cells, col_width)) for name, cells in rows]
+    starts = {s["env"]: s["start"] for s in summaries if s.get("start")}
+    lines += [""] + [f"{env}: {note}" for env, note in starts.items()]
     return "\n".join(lines)

@@ -105,8 +105,10 @@ def build_model(config: RunConfig, venv, settings: PpoSettings):
 
 def trained_policy_files(source: Path) -> tuple[Path, Path]:
     """(model, normalization statistics) of the trained policy that ``--init-from`` names: a
-    model or run folder (its final model, else its newest checkpoint) or a checkpoint ``.zip``."""
+    model or run folder (its final model, else its newest checkpoint), a checkpoint ``.zip``, or
+    a policy as its authors published it (a folder with one ``.zip`` and one ``.pkl``)."""
     from myo_sds.curricula.schema import ConfigError
+    from myo_sds.published import published_files
     from myo_sds.run_folder import RunFolder, statistics_beside
 
     source = Path(source)
@@ -115,7 +117,10 @@ def trained_policy_files(source: Path) -> tuple[Path, Path]:
             if not source.is_file():
                 raise FileNotFoundError(f"{source}: no such checkpoint")
             return source, statistics_beside(source)
-        return RunFolder.require(source).newest_policy()
+        if not source.is_dir():
+            raise FileNotFoundError(f"{source}: not a run folder: there is no such folder")
+        run = RunFolder.containing(source)
+        return run.newest_policy() if run is not None else published_files(source)
     except FileNotFoundError as error:
         raise ConfigError(f"--init-from: {error}") from None
 
@@ -124,9 +129,8 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
     """Fine-tuning: give a new ``model`` the weights and optimizer state of a trained policy,
     and its VecNormalize the policy's normalization moments (this run's normalization
     settings stay)."""
-    import pickle
-
     from myo_sds.curricula.schema import ConfigError
+    from myo_sds.published import load_statistics
 
     try:
         model.set_parameters(str(model_file), exact_match=True, device=model.device)
@@ -136,8 +140,7 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
                           f"settings (lstm_hidden_size, enable_critic_lstm, net_arch, fast_lstm_update): "
                           f"{first_line}") from None
     if statistics.is_file():
-        with statistics.open("rb") as file:
-            trained = pickle.load(file)
+        trained = load_statistics(statistics)
         if trained.obs_rms.mean.shape != venv.obs_rms.mean.shape:
             raise ConfigError(f"--init-from {statistics}: observations of shape {trained.obs_rms.mean.shape}, "
                               f"this task's are {venv.obs_rms.mean.shape}")
