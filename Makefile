@@ -22,6 +22,7 @@ demo: setup
 	$(PY) evaluate.py $(RUN_DIR) --env stage:hold-wide,p1 --episodes 20 --official --json $(RUN_DIR)/evaluation.json --plots $(RUN_DIR)/plots --video $(RUN_DIR)/episodes.mp4
 
 test: setup
+	$(PY) -m ruff check .
 	$(PY) -m pytest -q
 
 test-fast: setup

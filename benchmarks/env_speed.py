@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import mujoco
 import numpy as np
+
 from myo_sds.envs import TASKS
 
 OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p2"): "myoChallengeBaodingP2-v1",

@@ -58,9 +58,10 @@ def _official_env():
 
 def run_reference(steps: int, n_envs: int) -> dict[str, float]:
     import torch
-    from myo_sds.curricula.schema import PolicyConfig, PpoConfig
     from sb3_contrib import RecurrentPPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+
+    from myo_sds.curricula.schema import PolicyConfig, PpoConfig
 
     policy, ppo = PolicyConfig(), PpoConfig()
     inner = SubprocVecEnv([_official_env for _ in range(n_envs)])
@@ -81,7 +82,6 @@ def run_reference(steps: int, n_envs: int) -> dict[str, float]:
 def run_ours(steps: int, config: Path, overrides: tuple[str, ...] = ()) -> dict[str, float]:
     """``train.py``'s own loop on ``config``; the first rollout (warm-up) is not counted."""
     from myo_sds.curricula.schema import load_run_config
-
     from myo_sds.training import CurriculumTrainer
 
     base = load_run_config(config, overrides)
@@ -102,6 +102,7 @@ def run_ours(steps: int, config: Path, overrides: tuple[str, ...] = ()) -> dict[
 
 def _bare_worker(seconds: float) -> float:
     import mujoco
+
     from myo_sds.envs.baoding import FRAME_SKIP, BaodingEnv
 
     env = BaodingEnv()

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+
 from myo_sds.curricula.yaml_reader import ConfigError, YamlReader, load_yaml
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS

@@ -24,6 +24,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+
 from myo_sds.envs.baoding_task import (  # noqa: F401  (re-exported: the env's public names)
     _DIRECTION_SIGN,
     DIRECTIONS,

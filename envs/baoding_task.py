@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass
 from typing import Any, ClassVar
 
 import numpy as np
+
 from myo_sds.envs.knobs import (
     Range,
     TaskKnobs,
@@ -62,7 +63,7 @@ class BaodingTask:
     ball_friction: tuple[tuple[float, float, float], tuple[float, float, float]]
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any]) -> "BaodingTask":
+    def from_mapping(cls, values: Mapping[str, Any]) -> BaodingTask:
         """Build and check a task from a mapping with exactly this class's fields."""
         check_complete("task", values, cls.__dataclass_fields__)
         period = values["period"]

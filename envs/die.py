@@ -18,6 +18,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+
 from myo_sds.envs.die_task import (  # noqa: F401  (re-exported: the env's public names)
     FRAME_SKIP,
     HORIZON,

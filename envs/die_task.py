@@ -29,7 +29,7 @@ class DieTask:
     size_change: float  # m added to the die's half-sizes
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any]) -> "DieTask":
+    def from_mapping(cls, values: Mapping[str, Any]) -> DieTask:
         check_complete("task", values, cls.__dataclass_fields__)
         vector = lambda key: tuple(to_float(f"task.{key}[{i}]", v) for i, v in enumerate(values[key]))  # noqa: E731
         return cls(goal_offset=vector("goal_offset"), goal_euler=vector("goal_euler"),

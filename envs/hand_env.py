@@ -14,6 +14,7 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import mujoco
 import numpy as np
+
 from myo_sds.envs.assets import load_hand_model
 from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs, check_known
 from myo_sds.envs.metrics import PHASE_SECTORS, EpisodeResult, phase_sector

@@ -95,7 +95,7 @@ class CurriculumState:
         """The env step at which each stage reached so far began."""
         return [0] + [t.at_step for t in self.history]
 
-    def stage_start_walls(self, episodes: list["EpisodeRecord"]) -> list[float]:
+    def stage_start_walls(self, episodes: list[EpisodeRecord]) -> list[float]:
         """The training wall time at which each stage reached so far began. Transitions
         written before they kept it take it from the last episode logged by then."""
         walls = [0.0]
@@ -113,7 +113,7 @@ class CurriculumState:
         return json.dumps(values, indent=2)
 
     @classmethod
-    def from_json(cls, text: str) -> "CurriculumState":
+    def from_json(cls, text: str) -> CurriculumState:
         values = json.loads(text)
         values["status"] = RunStatus(values["status"])
         values["history"] = [Transition(**entry) for entry in values.get("history", [])]
@@ -142,7 +142,7 @@ class EpisodeRecord:
                 self.length, int(self.dropped), f"{self.effort:.6g}", self.direction or "", phase)
 
     @classmethod
-    def from_row(cls, row: dict[str, str]) -> "EpisodeRecord":
+    def from_row(cls, row: dict[str, str]) -> EpisodeRecord:
         phase = row.get("start_phase") or ""
         return cls(int(row["step"]), float(row["wall_s"]), int(row["stage_index"]), row["stage"], float(row["score"]),
                    int(row["solved_steps"]), int(row["length"]), row["dropped"] == "1", float(row["effort"]),
@@ -232,7 +232,7 @@ class _InRun:
     def __init__(self, name: str) -> None:
         self.name = name
 
-    def __get__(self, folder: "RunFolder | None", owner: type | None = None):
+    def __get__(self, folder: RunFolder | None, owner: type | None = None):
         return self if folder is None else folder.path / self.name
 
 
@@ -260,7 +260,7 @@ class RunFolder:
     # creation and provenance -----------------------------------------------------------
 
     @classmethod
-    def create(cls, output_dir: Path, config_name: str, seed: int) -> "RunFolder":
+    def create(cls, output_dir: Path, config_name: str, seed: int) -> RunFolder:
         """A fresh, race-free folder ``<output_dir>/<config>-<date>-<time>-s<seed>[-n]``."""
         stamp = time.strftime("%Y%m%d-%H%M%S")
         base = Path(output_dir) / f"{config_name}-{stamp}-s{seed}"
@@ -297,7 +297,7 @@ class RunFolder:
         """A run folder, or a model folder exported from one (:meth:`export_model`)."""
         return self.config_file.is_file() and (self.checkpoint_dir.is_dir() or self.final_model.is_file())
 
-    def export_model(self, destination: Path, checkpoint: CheckpointFiles | None = None) -> "RunFolder":
+    def export_model(self, destination: Path, checkpoint: CheckpointFiles | None = None) -> RunFolder:
         """A light folder for sharing a policy: the model of ``checkpoint`` (default: the final
         model, else the latest checkpoint) with its optimizer state, its normalization statistics
         and curriculum state, and the run's config, curriculum and provenance (command lines,
@@ -327,7 +327,7 @@ class RunFolder:
         return target
 
     @classmethod
-    def require(cls, path: Path) -> "RunFolder":
+    def require(cls, path: Path) -> RunFolder:
         """The run (or model) folder ``path`` names, else ``FileNotFoundError`` saying why."""
         folder = cls.containing(path) if Path(path).exists() else None
         if folder is None:
@@ -336,7 +336,7 @@ class RunFolder:
         return folder
 
     @classmethod
-    def containing(cls, path: Path) -> "RunFolder | None":
+    def containing(cls, path: Path) -> RunFolder | None:
         """The run folder that is ``path`` or holds it (a checkpoint file, ``checkpoints/``)."""
         path = Path(path)
         for folder in (path, path.parent, path.parent.parent):

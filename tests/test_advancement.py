@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from myo_sds.curricula.advancement import (
     Decision,
     StageProgress,

@@ -5,9 +5,10 @@ from __future__ import annotations
 import math
 
 import gymnasium as gym
-import myo_sds.envs  # noqa: F401  (registers the ids)
 import numpy as np
 import pytest
+
+import myo_sds.envs  # noqa: F401  (registers the ids)
 from myo_sds.envs.baoding import (
     OFFICIAL_START_ANGLE,
     ORBIT_CENTER,
@@ -289,6 +290,7 @@ def test_task_round_trips_through_dict():
 def test_ball_physics_edits_match_a_recompiled_model():
     """Edited ball radius and mass give the inertia and bounds MuJoCo's compiler would."""
     import mujoco
+
     from myo_sds.envs.assets import load_hand_model
 
     env = BaodingEnv()

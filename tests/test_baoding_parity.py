@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+
 from myo_sds.envs.baoding import DIRECTIONS, BaodingEnv, BaodingTask
 
 gym = pytest.importorskip("gymnasium")

@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import pytest
+
 from myo_sds.curricula.schema import (
     ConfigError,
     LearningRateDecay,

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import gymnasium as gym
 import mujoco
-import myo_sds.envs  # noqa: F401  (registers the ids)
 import numpy as np
 import pytest
+
+import myo_sds.envs  # noqa: F401  (registers the ids)
 from myo_sds.envs.die import DieEnv, DieKnobs, DieTask
 from myo_sds.envs.metrics import EpisodeResult
 from myo_sds.envs.physics import euler_to_quat, mat_to_euler

@@ -3,6 +3,7 @@
 import math
 
 import pytest
+
 from myo_sds.envs.metrics import (
     EpisodeResult,
     drop_rate,

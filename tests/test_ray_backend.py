@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from myo_sds.curricula.schema import ConfigError
 from tiny_run import write_config
 
+from myo_sds.curricula.schema import ConfigError
 from myo_sds.run_folder import RunFolder, RunStatus
 from myo_sds.training import CurriculumTrainer
 

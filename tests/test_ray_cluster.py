@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import pytest
-from myo_sds.curricula.schema import ConfigError
 from tiny_run import write_config
 
+from myo_sds.curricula.schema import ConfigError
 from myo_sds.run_folder import RunStatus
 from myo_sds.training import CurriculumTrainer
 

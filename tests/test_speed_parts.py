@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch as th
-from myo_sds.envs.baoding import BaodingEnv
 from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from myo_sds.envs.baoding import BaodingEnv
 from myo_sds.policy import SequenceLstmPolicy
 from myo_sds.vec_env import ThreadVecEnv
 

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 import yaml
-from myo_sds.curricula.schema import ConfigError
 from tiny_run import CONFIG, CURRICULUM, write_config
 
+from myo_sds.curricula.schema import ConfigError
 from myo_sds.run_folder import RunFolder, RunStatus
 from myo_sds.training import CurriculumTrainer
 

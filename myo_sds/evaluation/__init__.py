@@ -2,6 +2,7 @@
 which checkpoint (``checkpoints``), its episodes and their report (``episodes``), the printed
 table (``table``), plots (``plots``) and a video (``video``)."""
 
+from myo_sds.envs.metrics import phase_sector, sector_name
 from myo_sds.evaluation.checkpoints import (
     OFFICIAL_IDS,
     CheckpointRef,
@@ -13,7 +14,6 @@ from myo_sds.evaluation.checkpoints import (
     resolve_checkpoint,
     run_task,
 )
-from myo_sds.envs.metrics import phase_sector, sector_name
 from myo_sds.evaluation.episodes import (
     EvaluationReport,
     evaluate,

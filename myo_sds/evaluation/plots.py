@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from myo_sds.evaluation.checkpoints import EvaluationError
 from myo_sds.envs.metrics import phase_sector, sector_name
+from myo_sds.evaluation.checkpoints import EvaluationError
 from myo_sds.evaluation.episodes import EvaluationReport
 from myo_sds.run_folder import RunFolder, Transition
 

@@ -13,6 +13,7 @@ from myo_sds.curricula.schedule import PpoSettings
 from myo_sds.curricula.schema import RunConfig, Stage
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
+from myo_sds.sb3_internals import resize_rollout_buffer
 
 
 def env_factory(task: str, distribution: TaskKnobs, seed: int) -> Callable[[], Any]:
@@ -160,10 +161,4 @@ def apply_ppo_settings(model, settings: PpoSettings) -> None:
     model.batch_size = settings.batch_size
     model.n_epochs = settings.n_epochs
     if settings.n_steps != model.n_steps:
-        model.n_steps = settings.n_steps
-        buffer = model.rollout_buffer
-        lstm = model.policy.lstm_actor
-        model.rollout_buffer = type(buffer)(
-            model.n_steps, model.observation_space, model.action_space,
-            (model.n_steps, lstm.num_layers, model.n_envs, lstm.hidden_size), model.device,
-            gamma=model.gamma, gae_lambda=model.gae_lambda, n_envs=model.n_envs)
+        resize_rollout_buffer(model, settings.n_steps)

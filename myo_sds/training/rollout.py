@@ -16,6 +16,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from myo_sds.envs.knobs import TaskKnobs
+from myo_sds.sb3_internals import drop_queued_seeds
 
 
 class WorkerLost(RuntimeError):
@@ -99,7 +100,7 @@ class LocalRollouts:
         import torch
 
         venv = self.venv
-        venv.venv._reset_seeds()  # drop the seeds SB3's load queued for the next reset
+        drop_queued_seeds(venv.venv)
         if saved is not None and len(saved["envs"]) == venv.num_envs:
             for index, generator in enumerate(saved["envs"]):
                 venv.set_attr("np_random", generator, indices=[index])

@@ -22,6 +22,7 @@ from myo_sds.curricula.schedule import PpoSettings
 from myo_sds.curricula.schema import RunConfig
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.metrics import EpisodeResult
+from myo_sds.sb3_internals import drop_queued_seeds, prepare_rollout
 
 BUFFER_FIELDS = ("observations", "actions", "rewards", "returns", "episode_starts", "values", "log_probs",
                  "advantages", "hidden_states_pi", "cell_states_pi", "hidden_states_vf", "cell_states_vf")
@@ -36,10 +37,10 @@ class Moments:
     var: np.ndarray
 
     @classmethod
-    def of(cls, rms) -> "Moments":
+    def of(cls, rms) -> Moments:
         return cls(float(rms.count), np.array(rms.mean, dtype=np.float64), np.array(rms.var, dtype=np.float64))
 
-    def added_since(self, start: "Moments") -> "Moments":
+    def added_since(self, start: Moments) -> Moments:
         """The moments of the samples added to ``start`` to reach these (the parallel
         combination run backwards)."""
         count = self.count - start.count
@@ -137,7 +138,7 @@ class RolloutWorker:
         callback = self.callback
         callback.reset()
         callback.stage_index = stage_index
-        model._setup_learn(model.n_steps * venv.num_envs, callback, reset_num_timesteps=False)
+        prepare_rollout(model, model.n_steps * venv.num_envs, callback)
         model.collect_rollouts(venv, callback, model.rollout_buffer, n_rollout_steps=model.n_steps)
         buffer = model.rollout_buffer
         return {
@@ -160,7 +161,7 @@ class RolloutWorker:
     def restore_random_state(self, envs: list[Any], torch_rng: Any) -> None:
         import torch
 
-        self.venv.venv._reset_seeds()
+        drop_queued_seeds(self.venv.venv)
         for index, generator in enumerate(envs):
             self.venv.set_attr("np_random", generator, indices=[index])
         torch.set_rng_state(torch_rng)

@@ -41,6 +41,7 @@ from myo_sds.run_folder import (
     RunStatus,
     Transition,
 )
+from myo_sds.sb3_internals import set_last_observation, start_training, tensorboard_output
 from myo_sds.threads import UpdateThreads, available_cpus
 from myo_sds.training.callbacks import EpisodeCollector, UpdateInterrupted
 from myo_sds.training.factory import (
@@ -64,19 +65,6 @@ class RolloutTiming:
     update_s: float
 
 
-def resumed_tensorboard_format(folder: str, purge_step: int):
-    """SB3's TensorBoard writer, opened with ``purge_step``: TensorBoard then hides the events
-    at or after that step from earlier event files (those a killed run logged after the
-    checkpoint it is resumed from)."""
-    from stable_baselines3.common.logger import TensorBoardOutputFormat
-    from torch.utils.tensorboard import SummaryWriter
-
-    output = TensorBoardOutputFormat.__new__(TensorBoardOutputFormat)  # its __init__ takes no purge_step
-    output.writer = SummaryWriter(log_dir=folder, purge_step=purge_step)
-    output._is_closed = False
-    return output
-
-
 def _rollouts(config: RunConfig, model, stage: Stage, settings) -> RolloutCollector:
     """The config's rollout backend for ``model`` (whose env is the envs, or on Ray the holder
     of the merged normalization statistics)."""
@@ -88,8 +76,7 @@ def _rollouts(config: RunConfig, model, stage: Stage, settings) -> RolloutCollec
     from myo_sds.training.ray_rollouts import RayRollouts
 
     # The learner never resets the stand-in envs (that would feed zeros to the statistics).
-    model._last_obs = venv.venv.reset()
-    model._last_episode_starts = np.ones(venv.num_envs, dtype=bool)
+    set_last_observation(model, venv.venv.reset())
     return RayRollouts(config, venv, stage.distribution, settings, torch.get_rng_state())
 
 
@@ -133,7 +120,7 @@ class CurriculumTrainer:
 
     @classmethod
     def start(cls, config_path: str | Path, overrides: tuple[str, ...] = (), run_dir: Path | None = None,
-              overwrite: bool = False, progress: bool = True, init_from: Path | None = None) -> "CurriculumTrainer":
+              overwrite: bool = False, progress: bool = True, init_from: Path | None = None) -> CurriculumTrainer:
         """Validate the config, create the run folder and a new model at stage 1; with
         ``init_from``, the model starts from that trained policy (fine-tuning)."""
         from stable_baselines3.common.logger import configure
@@ -173,7 +160,7 @@ class CurriculumTrainer:
 
     @classmethod
     def resume(cls, run_dir: str | Path, progress: bool = True,
-               total_steps: int | None = None) -> "CurriculumTrainer":
+               total_steps: int | None = None) -> CurriculumTrainer:
         """Continue a run from its latest complete checkpoint: same stage, counters, optimizer,
         normalization state and random streams, same TensorBoard folder. ``total_steps`` raises
         the run's step budget (recorded in its config), which also continues a run that
@@ -212,7 +199,7 @@ class CurriculumTrainer:
         rollouts.restore_random_state(checkpoint.read_random_state(), fallback_seed=config.seed + state.num_timesteps)
         # Events a killed run logged after this checkpoint are hidden from TensorBoard.
         tb = str(folder.tensorboard_dir)
-        model.set_logger(Logger(tb, [resumed_tensorboard_format(tb, purge_step=state.num_timesteps + 1)]))
+        model.set_logger(Logger(tb, [tensorboard_output(tb, purge_step=state.num_timesteps + 1)]))
         folder.truncate_episodes(state.num_timesteps)
         folder.record_session(state.num_timesteps)
         return cls(config, folder, state, model, rollouts, progress)
@@ -241,8 +228,7 @@ class CurriculumTrainer:
         start_wall = state.wall_s
         # SB3's setup for training: the callback, and the first reset (or the LSTM states of a
         # loaded model); the trainer then drives rollouts and updates itself.
-        _, callback = model._setup_learn(config.total_steps, collector, reset_num_timesteps=False)
-        callback.on_training_start(locals(), globals())
+        callback = start_training(model, config.total_steps, collector)
         try:
             self._start_stage_display()
             while state.status is RunStatus.RUNNING:
