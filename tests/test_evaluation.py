@@ -213,8 +213,15 @@ def test_run_summary_gives_each_stage_its_steps_time_and_measured_value(tiny_run
         assert sector["score"] == pytest.approx(np.mean([r["score"] for r in inside]))
         assert sector["drop_rate"] == pytest.approx(np.mean([r["dropped"] for r in inside]))
     assert first.by_start_phase == {}  # only the current stage is split
+    # The newest checkpoint's action std; the tiny run's policy starts at exp(-1) and has learned.
+    newest = RunFolder(tiny_run.path).latest_checkpoint().model
+    from stable_baselines3.common.save_util import load_from_zip_file
+    std = load_from_zip_file(newest, load_data=False)[1]["policy"]["log_std"].exp()
+    assert summary.action_std == pytest.approx((float(std.mean()), float(std.min()), float(std.max())))
+    assert summary.action_std[1] < summary.action_std[0] < summary.action_std[2]
     assert main(["--status", str(tiny_run.path), "--json", str(tmp_path / "s.json")]) == 0
     printed = capsys.readouterr().out
+    assert f"action std of the newest saved policy: mean {summary.action_std[0]:.3f}" in printed
     assert "1 easy  passed" in printed and f"score {second.measured:.3f} / 0.9" in printed
     assert f"stage 2, its last {len(rows):,} episodes by the targets' start phase:" in printed
     assert json.loads((tmp_path / "s.json").read_text())["stages"][1]["trend"][-1][1] == pytest.approx(second.measured)

@@ -42,6 +42,13 @@ def test_two_stage_run_advances_and_records_everything(tiny_run):
                  folder.final_model, folder.final_vecnormalize):
         assert path.is_file(), path
     assert list(folder.tensorboard_dir.glob("events.out.tfevents.*"))
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    logged = EventAccumulator(str(folder.tensorboard_dir), size_guidance={"scalars": 0})
+    logged.Reload()
+    std = model.policy.log_std.detach().exp()  # after the last update, which the last point logs
+    assert logged.Scalars("policy/action_std_min")[-1].value == pytest.approx(float(std.min()), rel=1e-5)
+    assert logged.Scalars("policy/action_std_mean")[-1].value == pytest.approx(float(std.mean()), rel=1e-5)
     episodes = folder.read_episodes()
     assert len(episodes) > 8 and {e.stage for e in episodes} == {"easy", "hard"}
     assert len(folder.checkpoint_steps()) == 2  # keep_checkpoints

@@ -48,6 +48,9 @@ class RunSummary:
     # When the state above was written (Unix time). A process killed without warning leaves
     # "running" behind, so the age of its last checkpoint is what tells a live run from a dead one.
     saved_at: float | None = None
+    # The newest saved policy's action std over the 39 muscles: (mean, min, max). A std that has
+    # collapsed (the 2022 winner's ended at a mean of 0.116, min 0.086) no longer explores.
+    action_std: tuple[float, float, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -95,7 +98,21 @@ def summarize(run_dir: str | Path) -> RunSummary:
         stages.append(base)
     # An exported model (no checkpoints of its own) is a snapshot: its file times say nothing.
     saved_at = folder.state_file.stat().st_mtime if folder.checkpoint_dir.is_dir() else None
-    return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages, saved_at)
+    return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages, saved_at,
+                      _action_std(folder))
+
+
+def _action_std(folder: RunFolder) -> tuple[float, float, float] | None:
+    """(mean, min, max) of the newest saved policy's action std, None without a saved policy."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    checkpoint = folder.latest_checkpoint()
+    model = checkpoint.model if checkpoint is not None else folder.final_model
+    if not model.is_file():
+        return None
+    _, params, _ = load_from_zip_file(model, load_data=False, device="cpu")
+    std = params["policy"]["log_std"].exp()
+    return float(std.mean()), float(std.min()), float(std.max())
 
 
 def _steps(step: int) -> str:
@@ -129,6 +146,9 @@ def _status_line(summary: RunSummary, now: float) -> str:
 def format_summary(summary: RunSummary, now: float | None = None) -> str:
     """The summary as a table a person reads at a glance (``now``: Unix time, for the checkpoint's age)."""
     lines = [_status_line(summary, time.time() if now is None else now)]
+    if summary.action_std is not None:
+        mean, low, high = summary.action_std
+        lines.append(f"action std of the newest saved policy: mean {mean:.3f} (min {low:.3f}, max {high:.3f})")
     header, rows = stage_rows(summary)
     widths = [max(len(str(r[i])) for r in (header, *rows)) for i in range(len(header))]
     for row in (header, *rows):

@@ -321,6 +321,9 @@ class CurriculumTrainer:
             logger.record("time/env_stepping_share", timing.env_s / timing.wall_s)
             logger.record("time/update_share", timing.update_s / timing.wall_s)
         logger.record("time/update_threads", self.update_threads.current)
+        std = model.policy.log_std.detach().exp()
+        logger.record("policy/action_std_mean", float(std.mean()))  # SB3 logs the mean as train/std
+        logger.record("policy/action_std_min", float(std.min()))
         if self.config.rollout.backend != "local":
             logger.record("rollout/worker_restarts", self.rollouts.restarts)
         logger.record("curriculum/stage_index", state.stage_index)
