@@ -17,9 +17,11 @@ $(VENV)/.installed: pyproject.toml
 
 setup: $(VENV)/.installed
 
+# The quickstart run beside two trained policies: the 2022 winner's published phase-1 policy
+# (its video: it turns the balls on the 2022 start) and the shipped P1 policy, on both P1 starts.
 demo: setup
 	$(PY) train.py --config configs/quickstart.yaml --run-dir $(RUN_DIR) --overwrite
-	$(PY) evaluate.py $(RUN_DIR) --env stage:hold-wide,p1 --episodes 20 --official --json $(RUN_DIR)/evaluation.json --plots $(RUN_DIR)/plots --video $(RUN_DIR)/episodes.mp4
+	$(PY) evaluate.py models/reference/stiff_fingers_2022_p1 models/baoding_p1 $(RUN_DIR) --env p1_2022,p1 --episodes 5 --official --json $(RUN_DIR)/evaluation.json --plots $(RUN_DIR)/plots --video $(RUN_DIR)/episodes.mp4
 
 test: setup
 	$(PY) -m ruff check .

@@ -136,8 +136,25 @@ class BaodingEnv(MuscleHandEnv):
     def _goal_phase(self) -> float:
         return self._target_angle  # of the targets this step was solved against
 
+    # Close over the palm, from above the fingers, so the 1.5 cm solved radius can be seen.
+    CAMERA = (90.0, -65.0, 0.2)
+
     def _camera_target(self) -> np.ndarray:
         return self.data.site_xpos[list(self._target_sites)].mean(axis=0)
+
+    def _decorate_scene(self, scene: mujoco.MjvScene) -> None:
+        """Each target as a translucent sphere of the solved radius, green while that ball's
+        centre is inside it, red otherwise; the balls are drawn translucent, so the spheres show."""
+        balls = set(self._ball_geoms)
+        for index in range(scene.ngeom):
+            geom = scene.geoms[index]
+            if geom.objtype == mujoco.mjtObj.mjOBJ_GEOM and geom.objid in balls:
+                geom.rgba[3] = 0.4
+        radius = self.knobs.solved_radius
+        for ball, target in zip(self._ball_sites, self._target_sites):
+            inside = vector_norm(self.data.site_xpos[target] - self.data.site_xpos[ball]) < radius
+            self._add_sphere(scene, self.data.site_xpos[target], radius,
+                             (0.1, 0.9, 0.2, 0.55) if inside else (0.95, 0.15, 0.1, 0.55))
 
     # -- internals ----------------------------------------------------------------------
 

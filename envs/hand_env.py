@@ -244,14 +244,20 @@ class MuscleHandEnv(gym.Env):
             return None
         if self._renderer is None:
             self._renderer = make_renderer(self.model, 480, 640)
-            self._camera.azimuth, self._camera.elevation, self._camera.distance = 90.0, -50.0, 0.35
+            self._camera.azimuth, self._camera.elevation, self._camera.distance = self.CAMERA
         mujoco.mj_forward(self.model, self.data)  # derived quantities drawn (tendons) need it
         self._camera.lookat[:] = self._camera_target()
         self._renderer.update_scene(self.data, self._camera)
+        self._decorate_scene(self._renderer.scene)
         return self._renderer.render()
+
+    CAMERA = (90.0, -50.0, 0.35)  # azimuth, elevation (degrees), distance (m) of the render camera
 
     def _camera_target(self) -> np.ndarray:
         return self.data.xpos[self.model.body("trapezium").id]
+
+    def _decorate_scene(self, scene: mujoco.MjvScene) -> None:
+        """Add visual-only geoms to a rendered frame (the task's goals); none by default."""
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -259,6 +265,15 @@ class MuscleHandEnv(gym.Env):
             self._renderer = None
 
     # -- helpers ------------------------------------------------------------------------
+
+    @staticmethod
+    def _add_sphere(scene: mujoco.MjvScene, position: np.ndarray, radius: float, rgba: tuple[float, ...]) -> None:
+        """A visual-only sphere in a rendered frame (nothing if the scene is full)."""
+        if scene.ngeom >= scene.maxgeom:
+            return
+        mujoco.mjv_initGeom(scene.geoms[scene.ngeom], mujoco.mjtGeom.mjGEOM_SPHERE, np.array([radius, 0, 0]),
+                            np.asarray(position, dtype=np.float64), np.eye(3).ravel(), np.asarray(rgba, np.float32))
+        scene.ngeom += 1
 
     def _set_state(self, state: Mapping[str, Any]) -> None:
         data = self.data

@@ -344,3 +344,37 @@ def test_episode_counts_its_steps_and_solved_steps_by_where_the_targets_are():
         assert min(result.steps_by_target_phase) >= 24 and sum(result.steps_by_target_phase) == result.length == 200
         assert sum(result.solved_by_target_phase) == result.solved_steps > 0
         assert all(s <= n for s, n in zip(result.solved_by_target_phase, result.steps_by_target_phase))
+
+
+@pytest.mark.slow  # offscreen rendering
+def test_render_draws_each_target_as_a_sphere_of_the_solved_radius_coloured_by_its_ball():
+    import mujoco
+
+    env = BaodingEnv("p1_2022", render_mode="rgb_array")
+    env.reset(seed=0)
+    scene_geoms = []
+
+    def added(scene):  # the geoms the env adds after MuJoCo's own scene
+        scene_geoms[:] = [scene.geoms[i] for i in range(scene.ngeom)]
+
+    frame = env.render()
+    added(env._renderer.scene)
+    spheres = [g for g in scene_geoms[-2:] if g.type == int(mujoco.mjtGeom.mjGEOM_SPHERE) and g.objtype == 0]  # no model object
+    assert len(spheres) == 2 and frame.shape == (480, 640, 3)
+    obs = env._obs
+    for sphere, (target, offset) in zip(spheres, ((35, 41), (38, 44))):
+        assert sphere.size[0] == pytest.approx(0.015)
+        assert np.allclose(sphere.pos, obs[target:target + 3])
+        inside = np.linalg.norm(obs[offset:offset + 3]) < 0.015  # target - ball, from the observation
+        assert (sphere.rgba[1] > sphere.rgba[0]) == inside  # green inside, red outside
+    # The 2022 start: both targets on their balls (green); MyoSuite 3.0.0's: both off (red).
+    assert all(s.rgba[1] > s.rgba[0] for s in spheres)
+    env = BaodingEnv("p1", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.render()
+    scene = env._renderer.scene
+    assert all(scene.geoms[i].rgba[0] > scene.geoms[i].rgba[1] for i in (scene.ngeom - 2, scene.ngeom - 1))
+    # The balls are drawn translucent, so a sphere inside one shows.
+    balls = [scene.geoms[i] for i in range(scene.ngeom) if scene.geoms[i].objid in env._ball_geoms
+             and scene.geoms[i].objtype == int(mujoco.mjtObj.mjOBJ_GEOM)]
+    assert len(balls) == 2 and all(b.rgba[3] < 0.5 for b in balls)

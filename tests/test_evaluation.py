@@ -270,3 +270,23 @@ def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, cap
     assert (tiny_run.path / "command.txt").read_text().strip() in card
     assert main(["--export", str(tmp_path / "nothing"), "--to", str(tmp_path / "x")]) == 2
     assert "not a run folder" in capsys.readouterr().err
+
+
+@pytest.mark.slow  # renders video frames in software
+def test_cli_plots_and_video_of_folders_without_an_episode_log(tmp_path, capsys):
+    """A shipped model folder has no episode log: its shipped curve is copied; a published
+    policy has none, which is said; neither stops the histogram or the video."""
+    from myo_sds.cli.evaluate import main
+
+    shipped, published = REPO / "models" / "baoding_p1", REPO / "models" / "reference" / "stiff_fingers_2022_p1"
+    out = tmp_path / "out"
+    # The published policy drops the balls at step 47 of P1: a short video.
+    assert main([str(published), str(shipped), "--env", "p1", "--episodes", "1", "--plots", str(out),
+                 "--video", str(out / "v.mp4"), "--video-episodes", "1"]) == 0
+    printed = capsys.readouterr().out
+    assert (out / "learning_curve_baoding_p1.png").read_bytes() == (shipped / "learning_curve.png").read_bytes()
+    assert f"no learning curve for {published / 'phase1_final.zip'}: it is not inside a run" in printed
+    assert (out / "score_histogram.png").is_file()
+    import imageio.v3 as iio
+
+    assert iio.imread(out / "v.mp4").shape == (47 + 80, 480, 640, 3)

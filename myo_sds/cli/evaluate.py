@@ -40,6 +40,26 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def _learning_curve(ev, ref, folder: Path) -> str:
+    """Draw (or, for a model folder without an episode log, copy the shipped) learning curve of
+    ``ref``'s run into ``folder``; what was done, or why there is none, as one line. Never raises
+    for a missing curve: the other outputs are still written."""
+    import shutil
+
+    if ref.run_dir is None:
+        return f"no learning curve for {ref.label}: it is not inside a run or model folder"
+    path = folder / f"learning_curve_{ref.run_dir.name}.png"
+    try:
+        ev.plot_learning_curve(ref.run_dir, path)
+    except ev.EvaluationError as error:
+        shipped = ref.run_dir / "learning_curve.png"
+        if not shipped.is_file():
+            return f"no learning curve for {ref.label}: {error}"
+        shutil.copyfile(shipped, path)
+        return f"wrote {path} (the curve shipped with {ref.run_dir}: it has no episode log to draw one from)"
+    return f"wrote {path}"
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     from myo_sds import evaluation as ev
@@ -71,10 +91,7 @@ def main(argv: list[str] | None = None) -> int:
             ev.plot_score_histogram(reports, args.plots / "score_histogram.png")
             print(f"wrote {args.plots / 'score_histogram.png'}")
             for ref in refs:
-                if ref.run_dir is not None:
-                    path = args.plots / f"learning_curve_{ref.run_dir.name}.png"
-                    ev.plot_learning_curve(ref.run_dir, path)
-                    print(f"wrote {path}")
+                print(_learning_curve(ev, ref, args.plots))
         if args.video:
             picks = ev.chosen_episodes(reports[0], args.video_episodes)
             frames = ev.record_video(refs[0], choices[0][0], args.video, picks)
