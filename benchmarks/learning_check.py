@@ -75,7 +75,8 @@ def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float 
     """Train (or continue, or only read) the run ``folder/<setup>_s<seed>`` up to ``budget``
     env steps and ``max_wall_s`` seconds of training in all, and return its result."""
     from myo_sds.curricula.schema import load_run_config
-    from myo_sds.run_folder import RunFolder, RunStatus
+    from myo_sds.curricula.state import RunStatus
+    from myo_sds.run_folder import RunFolder
     from myo_sds.training import CurriculumTrainer
 
     setup = setup or config.stem

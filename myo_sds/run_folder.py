@@ -22,7 +22,6 @@ Every file is replaced in one rename (written under a temporary name first), so 
 from __future__ import annotations
 
 import csv
-import enum
 import json
 import os
 import pickle
@@ -30,9 +29,11 @@ import platform
 import sys
 import time
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
+
+from myo_sds.curricula.state import CurriculumState
 
 CONFIG_FILE = "config.yaml"
 CURRICULUM_FILE = "curriculum.yaml"
@@ -47,77 +48,6 @@ VERSIONS_FILE = "versions.json"
 MODEL_CARD = "README.md"
 EPISODE_COLUMNS = ("step", "wall_s", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
                    "effort", "direction", "start_phase")
-
-
-class RunStatus(str, enum.Enum):
-    """Where a run stands; the first three can be resumed (budget_reached with a larger budget)."""
-
-    RUNNING = "running"
-    INTERRUPTED = "interrupted"  # Ctrl-C or SIGTERM
-    TIME_LIMIT = "time_limit"  # --max-hours
-    BUDGET_REACHED = "budget_reached"  # total_steps spent
-    COMPLETED = "completed"  # the last stage passed
-    STOPPED = "stopped"  # a stage ran out of steps with on_max_steps: stop
-
-
-@dataclass(frozen=True)
-class Transition:
-    """A stage's end: passed, timed out (and the run went on) or stopped the run."""
-
-    stage: str
-    stage_index: int
-    decision: str  # an advancement Decision's value: passed | timed_out | stop
-    at_step: int  # the run's env step count when it happened
-    stage_steps: int
-    stage_episodes: int
-    measured: float  # the advancement metric over the stage's window
-    # The run's training wall time then (None in states written before it was kept). Not part of
-    # equality: two runs with the same schedule differ in timing.
-    wall_s: float | None = field(default=None, compare=False)
-
-
-@dataclass
-class CurriculumState:
-    """Where the run is in its curriculum; saved with every checkpoint."""
-
-    stage_index: int = 0
-    stage_start_step: int = 0
-    stage_episodes: int = 0
-    recent: list[float] = field(default_factory=list)  # the advancement window's values
-    episodes_per_stage: dict[str, int] = field(default_factory=dict)
-    steps_per_stage: dict[str, int] = field(default_factory=dict)
-    history: list[Transition] = field(default_factory=list)
-    status: RunStatus = RunStatus.RUNNING
-    num_timesteps: int = 0
-    wall_s: float = 0.0  # training wall time so far, over all sessions of the run
-
-    def stage_starts(self) -> list[int]:
-        """The env step at which each stage reached so far began."""
-        return [0] + [t.at_step for t in self.history]
-
-    def stage_start_walls(self, episodes: list[EpisodeRecord]) -> list[float]:
-        """The training wall time at which each stage reached so far began. Transitions
-        written before they kept it take it from the last episode logged by then."""
-        walls = [0.0]
-        for transition in self.history:
-            if transition.wall_s is not None:
-                walls.append(transition.wall_s)
-            else:
-                logged = [e.wall_s for e in episodes if e.step <= transition.at_step]
-                walls.append(logged[-1] if logged else walls[-1])
-        return walls
-
-    def to_json(self) -> str:
-        values = asdict(self)
-        values["status"] = self.status.value
-        return json.dumps(values, indent=2)
-
-    @classmethod
-    def from_json(cls, text: str) -> CurriculumState:
-        values = json.loads(text)
-        values["status"] = RunStatus(values["status"])
-        values["history"] = [Transition(**entry) for entry in values.get("history", [])]
-        return cls(**values)
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from tiny_run import write_config
 
-from myo_sds.run_folder import CurriculumState
+from myo_sds.curricula.state import CurriculumState
 from myo_sds.training import CurriculumTrainer
 
 

@@ -1,4 +1,5 @@
-"""The advancement rule on synthetic episode results (no simulator)."""
+"""The advancement rule and the curriculum state it reads, on synthetic episode results (no
+simulator)."""
 
 from __future__ import annotations
 
@@ -6,18 +7,19 @@ import numpy as np
 
 from myo_sds.curricula.advancement import (
     Decision,
-    StageProgress,
     decide,
     episode_metric,
 )
 from myo_sds.curricula.schema import AdvanceRule
+from myo_sds.curricula.state import CurriculumState
 from myo_sds.envs.metrics import EpisodeResult
 
 
 def progress(values, steps=10_000, window=4):
-    p = StageProgress(steps=steps)
-    p.record(values, window)
-    return p
+    """A run in its second stage (begun at step 1,000), ``steps`` env steps into it."""
+    state = CurriculumState(stage_index=1, stage_start_step=1_000, num_timesteps=1_000)
+    state.record("s2", 1_000 + steps, values, window)
+    return state
 
 
 def test_threshold_needs_a_full_window():
@@ -31,8 +33,22 @@ def test_threshold_needs_a_full_window():
 
 def test_window_keeps_only_the_most_recent_episodes():
     p = progress([0.0] * 10 + [1.0] * 4, window=4)
-    assert list(p.recent) == [1.0] * 4 and p.episodes == 14 and p.measured == 1.0
+    assert p.recent == [1.0] * 4 and p.stage_episodes == 14 and p.measured == 1.0
+    assert p.episodes_per_stage == {"s2": 14} and p.steps_per_stage == {"s2": 10_000} == {"s2": p.stage_steps}
     assert decide(AdvanceRule(threshold=1.0, window=4), p) is Decision.PASSED
+
+
+def test_a_stage_ends_into_the_history_and_the_next_begins_empty():
+    state = progress([0.25, 0.75], steps=3_000)
+    transition = state.end_stage("s2", Decision.PASSED.value, wall_s=12.0)
+    assert (transition.stage, transition.stage_index, transition.at_step) == ("s2", 1, 4_000)
+    assert (transition.stage_steps, transition.stage_episodes, transition.measured) == (3_000, 2, 0.5)
+    assert state.history == [transition] and state.stage_starts() == [0, 4_000]
+    state.begin_next_stage()
+    assert (state.stage_index, state.stage_start_step, state.stage_steps, state.stage_episodes) == (2, 4_000, 0, 0)
+    assert state.recent == [] and np.isnan(state.measured)
+    # The JSON a checkpoint holds reads back as the same state.
+    assert CurriculumState.from_json(state.to_json()) == state
 
 
 def test_min_steps_delays_passing():
@@ -65,16 +81,17 @@ def test_episode_metrics():
 def simulated_schedule(seed: int, rules: list[AdvanceRule]) -> list[tuple[int, str]]:
     """Stage transitions of a synthetic run whose episode scores improve with steps."""
     rng = np.random.default_rng(seed)
-    stage, stage_start, p, schedule = 0, 0, StageProgress(), []
+    state, schedule = CurriculumState(), []
     for step in range(0, 200_000, 1000):
-        p.steps = step - stage_start
-        skill = min(1.0, p.steps / 50_000)
-        p.record(np.clip(rng.normal(skill * 0.8, 0.1, 3), 0, 1), rules[stage].window)
-        decision = decide(rules[stage], p)
+        skill = min(1.0, (step - state.stage_start_step) / 50_000)
+        rule = rules[state.stage_index]
+        state.record(f"s{state.stage_index}", step, np.clip(rng.normal(skill * 0.8, 0.1, 3), 0, 1), rule.window)
+        decision = decide(rule, state)
         if decision is not Decision.STAY:
             schedule.append((step, decision.value))
-            stage, stage_start, p = stage + 1, step, StageProgress()
-            if stage == len(rules):
+            state.end_stage(f"s{state.stage_index}", decision.value, wall_s=0.0)
+            state.begin_next_stage()
+            if state.stage_index == len(rules):
                 break
     return schedule
 

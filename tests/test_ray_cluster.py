@@ -6,7 +6,7 @@ import pytest
 from tiny_run import write_config
 
 from myo_sds.curricula.schema import ConfigError
-from myo_sds.run_folder import RunStatus
+from myo_sds.curricula.state import RunStatus
 from myo_sds.training import CurriculumTrainer
 
 ray = pytest.importorskip("ray")

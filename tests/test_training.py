@@ -14,7 +14,8 @@ import yaml
 from tiny_run import CONFIG, CURRICULUM, write_config
 
 from myo_sds.curricula.schema import ConfigError
-from myo_sds.run_folder import RunFolder, RunStatus
+from myo_sds.curricula.state import RunStatus
+from myo_sds.run_folder import RunFolder
 from myo_sds.training import CurriculumTrainer
 
 REPO = Path(__file__).resolve().parents[1]

@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, FileNotFoundError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    from myo_sds.run_folder import RunStatus
+    from myo_sds.curricula.state import RunStatus
     from myo_sds.training import CurriculumTrainer
 
     try:

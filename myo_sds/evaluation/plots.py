@@ -7,10 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
+from myo_sds.curricula.state import Transition
 from myo_sds.envs.metrics import phase_sector, sector_name
 from myo_sds.evaluation.checkpoints import EvaluationError
 from myo_sds.evaluation.episodes import EvaluationReport
-from myo_sds.run_folder import RunFolder, Transition
+from myo_sds.run_folder import RunFolder
 
 
 def trailing_mean(values: np.ndarray, window: int) -> np.ndarray:

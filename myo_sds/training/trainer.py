@@ -21,7 +21,6 @@ import yaml
 
 from myo_sds.curricula.advancement import (
     Decision,
-    StageProgress,
     decide,
     episode_metric,
 )
@@ -33,14 +32,9 @@ from myo_sds.curricula.schema import (
     load_run_config,
     stage_label,
 )
+from myo_sds.curricula.state import CurriculumState, RunStatus
 from myo_sds.envs.task_specs import TASK_SPECS
-from myo_sds.run_folder import (
-    CurriculumState,
-    EpisodeRecord,
-    RunFolder,
-    RunStatus,
-    Transition,
-)
+from myo_sds.run_folder import EpisodeRecord, RunFolder
 from myo_sds.sb3_internals import set_last_observation, start_training, tensorboard_output
 from myo_sds.threads import UpdateThreads, available_cpus
 from myo_sds.training.callbacks import EpisodeCollector, UpdateInterrupted
@@ -92,9 +86,6 @@ class CurriculumTrainer:
         self.model, self.rollouts = model, rollouts
         self.progress_bar = StageProgressBar(progress, len(config.curriculum.stages))
         self.next_checkpoint = (state.num_timesteps // config.checkpoint_every + 1) * config.checkpoint_every
-        self.progress = StageProgress(steps=state.num_timesteps - state.stage_start_step,
-                                      episodes=state.stage_episodes)
-        self.progress.recent.extend(state.recent)
         self.timings: list[RolloutTiming] = []
         self.iteration_started_at = time.perf_counter()
         self.update_threads = UpdateThreads(available_cpus(), fixed=config.num_threads or None)
@@ -254,7 +245,7 @@ class CurriculumTrainer:
                     self.progress_bar.write(f"{collector.stop_requested}: saving a checkpoint; continue with "
                                             f"`python train.py --resume {self.run_dir}`")
                     break
-                self.progress_bar.describe(self.progress.measured, self._rule_text(), model.num_timesteps)
+                self.progress_bar.describe(state.measured, self._rule_text(), model.num_timesteps)
                 if model.num_timesteps >= self.next_checkpoint and state.status is RunStatus.RUNNING:
                     self.save_checkpoint()
         finally:
@@ -289,11 +280,11 @@ class CurriculumTrainer:
         rule = self.stage.advance
         if rule is None:
             return "no advancement rule"
-        return f"{rule.metric} {{value}} of {rule.threshold} over {len(self.progress.recent)}/{rule.window} episodes"
+        return f"{rule.metric} {{value}} of {rule.threshold} over {len(self.state.recent)}/{rule.window} episodes"
 
     def _start_stage_display(self) -> None:
         state = self.state
-        self.progress_bar.start_stage(state.stage_index, self.stage, self.progress.steps, int(self.model.num_timesteps),
+        self.progress_bar.start_stage(state.stage_index, self.stage, state.stage_steps, int(self.model.num_timesteps),
                                       self.config.total_steps)
 
     def _after_rollout(self) -> None:
@@ -302,8 +293,7 @@ class CurriculumTrainer:
         rule = self.stage.advance
         metric = rule.metric if rule else "score"
         window = rule.window if rule else 100
-        self.progress.record((episode_metric(metric, r) for _, _, r in results), window)
-        self.progress.steps = model.num_timesteps - state.stage_start_step
+        state.record(self.stage.name, int(model.num_timesteps), (episode_metric(metric, r) for _, _, r in results), window)
         self.folder.append_episodes(
             EpisodeRecord(step, wall_s, state.stage_index, self.stage.name, r.score, r.solved_steps, r.length,
                           r.dropped, r.effort, r.direction, r.start_phase) for step, wall_s, r in results)
@@ -327,26 +317,20 @@ class CurriculumTrainer:
         if self.config.rollout.backend != "local":
             logger.record("rollout/worker_restarts", self.rollouts.restarts)
         logger.record("curriculum/stage_index", state.stage_index)
-        logger.record("curriculum/stage_steps", self.progress.steps)
-        if not math.isnan(self.progress.measured):
-            logger.record("curriculum/measured", self.progress.measured)
-        decision = decide(rule, self.progress)
+        logger.record("curriculum/stage_steps", state.stage_steps)
+        if not math.isnan(state.measured):
+            logger.record("curriculum/measured", state.measured)
+        decision = decide(rule, state)
         if decision is not Decision.STAY:
             self._transition(decision)
         logger.dump(model.num_timesteps)
-        self._sync_state()
 
     def _transition(self, decision: Decision) -> None:
         state, model, config = self.state, self.model, self.config
         stage = self.stage
-        state.history.append(Transition(stage.name, state.stage_index, decision.value, int(model.num_timesteps),
-                                        self.progress.steps, self.progress.episodes, self.progress.measured,
-                                        state.wall_s))
-        state.episodes_per_stage[stage.name] = self.progress.episodes
-        state.steps_per_stage[stage.name] = self.progress.steps
+        measured = state.end_stage(stage.name, decision.value, state.wall_s).measured
         verdict = {Decision.PASSED: "passed", Decision.TIMED_OUT: "ended unpassed (max_steps)",
                    Decision.STOP: "ended unpassed"}[decision]
-        measured = self.progress.measured
         self.progress_bar.write(f"{stage_label(state.stage_index, stage.name)} {verdict} at step {model.num_timesteps}: "
                                 + self._rule_text().format(value=f"{measured:.3f}"))
         model.logger.record("curriculum/transition", state.stage_index + 1)
@@ -357,22 +341,11 @@ class CurriculumTrainer:
             state.status = RunStatus.COMPLETED
             self.progress_bar.write("curriculum completed")
             return
-        state.stage_index += 1
-        state.stage_start_step = int(model.num_timesteps)
-        self.progress = StageProgress()
+        state.begin_next_stage()
         self.collector.stage_index = state.stage_index
         self.rollouts.set_stage(self.stage.distribution)
         self.apply_ppo_settings()
         self._start_stage_display()
-
-    def _sync_state(self) -> None:
-        state = self.state
-        state.num_timesteps = int(self.model.num_timesteps)
-        state.stage_episodes = self.progress.episodes
-        state.recent = list(self.progress.recent)
-        name = self.stage.name
-        state.episodes_per_stage[name] = self.progress.episodes
-        state.steps_per_stage[name] = self.progress.steps
 
     def close(self) -> None:
         """Release the envs (and a Ray backend's workers)."""
@@ -380,7 +353,7 @@ class CurriculumTrainer:
 
     def save_checkpoint(self) -> Path:
         """Model, statistics, curriculum state and random streams of this step (``run_folder``)."""
-        self._sync_state()
+        self.state.record(self.stage.name, int(self.model.num_timesteps))
         files = self.folder.save_checkpoint(self.model, self.venv, self.state, self.rollouts.random_state(),
                                             keep=self.config.keep_checkpoints)
         self.next_checkpoint = (files.steps // self.config.checkpoint_every + 1) * self.config.checkpoint_every

@@ -1,0 +1,131 @@
+"""Where a run is in its curriculum: one object, saved with every checkpoint
+(``curriculum_state.json``), changed only through its methods by the trainer; the run folder
+reads and writes it, the advancement rule (:func:`myo_sds.curricula.advancement.decide`) reads it.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Protocol
+
+
+class LoggedEpisode(Protocol):
+    step: int
+    wall_s: float
+
+
+class RunStatus(str, enum.Enum):
+    """Where a run stands; the first three can be resumed (budget_reached with a larger budget)."""
+
+    RUNNING = "running"
+    INTERRUPTED = "interrupted"  # Ctrl-C or SIGTERM
+    TIME_LIMIT = "time_limit"  # --max-hours
+    BUDGET_REACHED = "budget_reached"  # total_steps spent
+    COMPLETED = "completed"  # the last stage passed
+    STOPPED = "stopped"  # a stage ran out of steps with on_max_steps: stop
+
+
+@dataclass(frozen=True)
+class Transition:
+    """A stage's end: passed, timed out (and the run went on) or stopped the run."""
+
+    stage: str
+    stage_index: int
+    decision: str  # an advancement Decision's value: passed | timed_out | stop
+    at_step: int  # the run's env step count when it happened
+    stage_steps: int
+    stage_episodes: int
+    measured: float  # the advancement metric over the stage's window
+    # The run's training wall time then (None in states written before it was kept). Not part of
+    # equality: two runs with the same schedule differ in timing.
+    wall_s: float | None = field(default=None, compare=False)
+
+
+@dataclass
+class CurriculumState:
+    """Where the run is in its curriculum; saved with every checkpoint."""
+
+    stage_index: int = 0
+    stage_start_step: int = 0
+    stage_episodes: int = 0
+    recent: list[float] = field(default_factory=list)  # the advancement window's values
+    episodes_per_stage: dict[str, int] = field(default_factory=dict)
+    steps_per_stage: dict[str, int] = field(default_factory=dict)
+    history: list[Transition] = field(default_factory=list)
+    status: RunStatus = RunStatus.RUNNING
+    num_timesteps: int = 0
+    wall_s: float = 0.0  # training wall time so far, over all sessions of the run
+
+    # the current stage ------------------------------------------------------------------
+
+    @property
+    def stage_steps(self) -> int:
+        """Env steps spent in the current stage."""
+        return self.num_timesteps - self.stage_start_step
+
+    @property
+    def measured(self) -> float:
+        """The advancement metric: the mean of the window's values (nan before the first episode)."""
+        return sum(self.recent) / len(self.recent) if self.recent else math.nan
+
+    def record(self, stage: str, num_timesteps: int, values: Iterable[float] = (), window: int | None = None) -> None:
+        """The current stage ``stage`` is at env step ``num_timesteps``: add the metric values of
+        the episodes that ended since, keeping the last ``window``."""
+        self.num_timesteps = num_timesteps
+        for value in values:
+            self.recent.append(float(value))
+            self.stage_episodes += 1
+        if window is not None:
+            del self.recent[:-window]
+        self.episodes_per_stage[stage] = self.stage_episodes
+        self.steps_per_stage[stage] = self.stage_steps
+
+    def end_stage(self, stage: str, decision: str, wall_s: float) -> Transition:
+        """Record the current stage's end (``decision``: passed | timed_out | stop)."""
+        transition = Transition(stage, self.stage_index, decision, self.num_timesteps, self.stage_steps,
+                                self.stage_episodes, self.measured, wall_s)
+        self.history.append(transition)
+        return transition
+
+    def begin_next_stage(self) -> None:
+        """Start the next stage at the current step, with an empty window."""
+        self.stage_index += 1
+        self.stage_start_step = self.num_timesteps
+        self.stage_episodes = 0
+        self.recent = []
+
+    # the whole run -------------------------------------------------------------------
+
+    def stage_starts(self) -> list[int]:
+        """The env step at which each stage reached so far began."""
+        return [0] + [t.at_step for t in self.history]
+
+    def stage_start_walls(self, episodes: Sequence[LoggedEpisode]) -> list[float]:
+        """The training wall time at which each stage reached so far began. Transitions
+        written before they kept it take it from the last episode logged by then."""
+        walls = [0.0]
+        for transition in self.history:
+            if transition.wall_s is not None:
+                walls.append(transition.wall_s)
+            else:
+                logged = [e.wall_s for e in episodes if e.step <= transition.at_step]
+                walls.append(logged[-1] if logged else walls[-1])
+        return walls
+
+    def to_json(self) -> str:
+        values = asdict(self)
+        values["status"] = self.status.value
+        return json.dumps(values, indent=2)
+
+    @classmethod
+    def from_json(cls, text: str) -> CurriculumState:
+        values = json.loads(text)
+        values["status"] = RunStatus(values["status"])
+        values["history"] = [Transition(**entry) for entry in values.get("history", [])]
+        return cls(**values)
+
+
