@@ -13,7 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 from myo_sds.threads import available_cpus
 
@@ -59,3 +59,37 @@ class ThreadVecEnv(DummyVecEnv):
         if self._pool is not None:
             self._pool.shutdown()
         super().close()
+
+
+class StatisticsOnlyVecEnv(VecEnv):
+    """The learner's stand-in for the remote envs: their spaces and count, for the model and the
+    VecNormalize that holds the merged statistics. It is never stepped."""
+
+    def __init__(self, num_envs: int, observation_space: gym.Space, action_space: gym.Space) -> None:
+        super().__init__(num_envs, observation_space, action_space)
+
+    def reset(self):
+        return np.zeros((self.num_envs, *self.observation_space.shape), dtype=np.float32)
+
+    def step_async(self, actions) -> None:
+        raise RuntimeError("the learner's envs run on Ray workers; it does not step them")
+
+    def step_wait(self):
+        raise RuntimeError("the learner's envs run on Ray workers; it does not step them")
+
+    def close(self) -> None:
+        pass
+
+    def get_attr(self, attr_name, indices=None):
+        if attr_name == "render_mode":  # asked by VecEnv's constructor
+            return [None] * self.num_envs
+        raise AttributeError(attr_name)
+
+    def set_attr(self, attr_name, value, indices=None) -> None:
+        raise AttributeError(attr_name)
+
+    def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
+        raise AttributeError(method_name)
+
+    def env_is_wrapped(self, wrapper_class, indices=None):
+        return [False] * self.num_envs

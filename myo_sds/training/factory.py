@@ -31,11 +31,7 @@ def env_factory(task: str, distribution: TaskKnobs, seed: int) -> Callable[[], A
 
 def build_vec_env(config: RunConfig, stage: Stage):
     """The training VecEnv (``n_envs`` workers, seeded ``seed + rank``) under VecNormalize."""
-    from stable_baselines3.common.vec_env import (
-        DummyVecEnv,
-        SubprocVecEnv,
-        VecNormalize,
-    )
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from myo_sds.vec_env import ThreadVecEnv
 
@@ -48,6 +44,14 @@ def build_vec_env(config: RunConfig, stage: Stage):
     else:
         venv = DummyVecEnv(factories)
     venv.seed(config.seed)
+    return normalized(config, venv)
+
+
+def normalized(config: RunConfig, venv):
+    """``venv`` under the VecNormalize the run's ``normalize`` settings describe (the one
+    builder of it: local envs, the Ray learner's stand-in and each Ray worker's envs)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
     norm = config.normalize
     return VecNormalize(venv, norm_obs=norm.observations, norm_reward=norm.rewards,
                         clip_obs=norm.clip_obs, clip_reward=norm.clip_reward, gamma=config.ppo.gamma)
@@ -62,16 +66,12 @@ def build_training_venv(config: RunConfig, stage: Stage):
 def build_statistics_venv(config: RunConfig, stage: Stage):
     """For the Ray backend: the envs' spaces and count under the VecNormalize that holds the
     merged statistics (the envs themselves run on the workers)."""
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    from myo_sds.training.ray_rollouts import StatisticsOnlyVecEnv
+    from myo_sds.vec_env import StatisticsOnlyVecEnv
 
     probe = TASK_SPECS[config.curriculum.task].env_class()(distribution=stage.distribution)
     stand_in = StatisticsOnlyVecEnv(config.n_envs, probe.observation_space, probe.action_space)
     probe.close()
-    norm = config.normalize
-    return VecNormalize(stand_in, norm_obs=norm.observations, norm_reward=norm.rewards,
-                        clip_obs=norm.clip_obs, clip_reward=norm.clip_reward, gamma=config.ppo.gamma)
+    return normalized(config, stand_in)
 
 
 def build_model(config: RunConfig, venv, settings: PpoSettings):

@@ -20,52 +20,16 @@ import logging
 import time
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv
 
 from myo_sds.curricula.schedule import PpoSettings
 from myo_sds.curricula.schema import ConfigError, RunConfig
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.training.rollout import WorkerLost
-from myo_sds.training.rollout_worker import BUFFER_FIELDS, Moments, RolloutWorker
+from myo_sds.training.rollout_worker import BUFFER_FIELDS, Moments, RolloutResult, RolloutWorker
 
 log = logging.getLogger(__name__)
 PLACEMENT_TIMEOUT_S = 120.0
-
-
-class StatisticsOnlyVecEnv(VecEnv):
-    """The learner's stand-in for the remote envs: their spaces and count, for the model and the
-    VecNormalize that holds the merged statistics. It is never stepped."""
-
-    def __init__(self, num_envs: int, observation_space: gym.Space, action_space: gym.Space) -> None:
-        super().__init__(num_envs, observation_space, action_space)
-
-    def reset(self):
-        return np.zeros((self.num_envs, *self.observation_space.shape), dtype=np.float32)
-
-    def step_async(self, actions) -> None:
-        raise RuntimeError("the learner's envs run on Ray workers; it does not step them")
-
-    def step_wait(self):
-        raise RuntimeError("the learner's envs run on Ray workers; it does not step them")
-
-    def close(self) -> None:
-        pass
-
-    def get_attr(self, attr_name, indices=None):
-        if attr_name == "render_mode":  # asked by VecEnv's constructor
-            return [None] * self.num_envs
-        raise AttributeError(attr_name)
-
-    def set_attr(self, attr_name, value, indices=None) -> None:
-        raise AttributeError(attr_name)
-
-    def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
-        raise AttributeError(method_name)
-
-    def env_is_wrapped(self, wrapper_class, indices=None):
-        return [False] * self.num_envs
 
 
 def _check_reachable(address: str | None, timeout_s: float = 5.0) -> None:
@@ -120,7 +84,7 @@ class RayRollouts:
         remote = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=0)(RolloutWorker)
         self.workers = [remote.remote(config, index, distribution, settings, torch_rng if index == 0 else None)
                         for index in range(config.rollout.workers)]
-        self.distribution = distribution
+        self.distribution, self.settings = distribution, settings
         self.env_seconds = 0.0
         # Where a rollout's wall time goes, summed: putting the weights, waiting for the workers,
         # filling the buffer and merging the statistics.
@@ -142,10 +106,8 @@ class RayRollouts:
         weights = ray.put({k: v.detach().cpu() for k, v in model.policy.state_dict().items()})
         put_at = time.perf_counter()
         self.seconds["broadcast"] += put_at - started
-        settings = PpoSettings(model.learning_rate, model.n_steps, model.batch_size, model.n_epochs,
-                               model.clip_range(1.0), model.ent_coef)
         stats = (self.venv.obs_rms, self.venv.ret_rms)
-        results = self._gather(weights, stats, settings, callback.stage_index)
+        results = self._gather(weights, stats, self.settings, callback.stage_index)
         gathered_at = time.perf_counter()
         self.seconds["sampling"] += gathered_at - put_at
         buffer, k = model.rollout_buffer, self.k
@@ -155,9 +117,9 @@ class RayRollouts:
                 target = getattr(buffer, name)
                 columns = slice(index * k, (index + 1) * k)
                 if target.ndim == 4:  # LSTM states: (steps, layers, envs, hidden)
-                    target[:, :, columns] = result["buffer"][name]
+                    target[:, :, columns] = result.buffer[name]
                 else:
-                    target[:, columns] = result["buffer"][name]
+                    target[:, columns] = result.buffer[name]
         buffer.pos, buffer.full, buffer.generator_ready = buffer.buffer_size, True, False
         self._merge_statistics(results)
         n_envs = self.config.n_envs
@@ -165,14 +127,17 @@ class RayRollouts:
         model.num_timesteps += model.n_steps * n_envs
         # In env step order, and within a step in global env rank order (workers in turn), as locally.
         episodes = sorted(((start_step + (step + 1) * n_envs, start_wall + seconds, stage, result)
-                           for result_set in results for step, seconds, stage, result in result_set["episodes"]),
+                           for result_set in results for step, seconds, stage, result in result_set.episodes),
                           key=lambda episode: episode[0])
-        callback.add_remote_results(episodes, [r["term_sums"] for r in results], sum(r["term_count"] for r in results),
+        callback.add_remote_results(episodes, [r.term_sums for r in results], sum(r.term_count for r in results),
                                     model.n_steps * n_envs)
-        self.env_seconds += max(r["seconds"] for r in results)
+        self.env_seconds += max(r.seconds for r in results)
         self.seconds["gathering"] += time.perf_counter() - gathered_at
         callback.on_rollout_end()
         return True
+
+    def set_ppo_settings(self, settings: PpoSettings) -> None:
+        self.settings = settings
 
     def set_stage(self, distribution: TaskKnobs) -> None:
         import ray
@@ -223,7 +188,7 @@ class RayRollouts:
 
     # internals ---------------------------------------------------------------------------
 
-    def _gather(self, weights, stats, settings: PpoSettings, stage_index: int) -> list[dict[str, Any]]:
+    def _gather(self, weights, stats, settings: PpoSettings, stage_index: int) -> list[RolloutResult]:
         """Every worker's rollout; a worker that died is restarted by Ray and asked again."""
         import ray
         from ray.exceptions import RayActorError
@@ -274,15 +239,15 @@ class RayRollouts:
         envs = [seeding.np_random(base + index * self.k + rank)[0] for rank in range(self.k)]
         self._call(index, "restore_random_state", envs, torch.Generator().manual_seed(base + index).get_state())
 
-    def _merge_statistics(self, results: list[dict[str, Any]]) -> None:
+    def _merge_statistics(self, results: list[RolloutResult]) -> None:
         """Worker 0's statistics (the learner's plus what it saw, updated step by step) plus
         what every other worker added."""
-        obs_rms, ret_rms = copy.deepcopy(results[0]["obs_rms"]), copy.deepcopy(results[0]["ret_rms"])
+        obs_rms, ret_rms = copy.deepcopy(results[0].obs_rms), copy.deepcopy(results[0].ret_rms)
         for result in results[1:]:
-            for rms, added in ((obs_rms, result["obs_added"]), (ret_rms, result["ret_added"])):
+            for rms, added in ((obs_rms, result.obs_added), (ret_rms, result.ret_added)):
                 if added.count > 0:
                     rms.update_from_moments(added.mean, added.var, added.count)
         self.venv.obs_rms, self.venv.ret_rms = obs_rms, ret_rms
 
 
-__all__ = ["Moments", "RayRollouts", "StatisticsOnlyVecEnv", "WorkerLost", "connect"]
+__all__ = ["Moments", "RayRollouts", "WorkerLost", "connect"]

@@ -15,6 +15,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from myo_sds.curricula.schedule import PpoSettings
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.sb3_internals import drop_queued_seeds
 
@@ -36,6 +37,9 @@ class RolloutCollector(Protocol):
 
     def set_stage(self, distribution: TaskKnobs) -> None:
         """Give every env the new stage's knobs before the next rollout."""
+
+    def set_ppo_settings(self, settings: PpoSettings) -> None:
+        """The PPO settings in force from the next rollout on (its length, for remote buffers)."""
 
     def random_state(self) -> dict[str, Any]:
         """Everything random that shapes the episodes and updates to come."""
@@ -84,6 +88,9 @@ class LocalRollouts:
 
     def set_stage(self, distribution: TaskKnobs) -> None:
         self.venv.env_method("configure", distribution=distribution)
+
+    def set_ppo_settings(self, settings: PpoSettings) -> None:
+        pass  # the model the trainer updates is the one that collects
 
     def random_state(self) -> dict[str, Any]:
         """Each env's generator (task draws at reset), and the global python, numpy (minibatch

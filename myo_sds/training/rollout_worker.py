@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import copy
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,7 @@ from myo_sds.curricula.schema import RunConfig
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.metrics import EpisodeResult
 from myo_sds.sb3_internals import drop_queued_seeds, prepare_rollout
+from myo_sds.training.factory import apply_ppo_settings, build_model, env_factory, normalized
 
 BUFFER_FIELDS = ("observations", "actions", "rewards", "returns", "episode_starts", "values", "log_probs",
                  "advantages", "hidden_states_pi", "cell_states_pi", "hidden_states_vf", "cell_states_vf")
@@ -49,6 +50,22 @@ class Moments:
         mean = (self.count * self.mean - start.count * start.mean) / count
         m2 = self.var * self.count - start.var * start.count - (mean - start.mean) ** 2 * start.count * count / self.count
         return Moments(count, mean, np.maximum(m2 / count, 0.0))
+
+
+@dataclass
+class RolloutResult:
+    """What a worker sends back after one rollout."""
+
+    buffer: dict[str, np.ndarray]  # its columns of the rollout buffer, by field (BUFFER_FIELDS)
+    obs_rms: Any  # its normalization statistics at the rollout's end (the learner's plus what it saw)
+    ret_rms: Any
+    obs_added: Moments  # what its envs added to the statistics during the rollout
+    ret_added: Moments
+    # Finished episodes: (step index in the rollout, seconds since it began, stage it began in, result).
+    episodes: list[tuple[int, float, int, EpisodeResult]] = field(default_factory=list)
+    term_sums: dict[str, float] = field(default_factory=dict)  # reward terms summed over steps and envs
+    term_count: int = 0  # env steps summed over
+    seconds: float = 0.0  # the rollout's wall time on the worker
 
 
 class _WorkerCallback(BaseCallback):
@@ -100,11 +117,9 @@ class RolloutWorker:
     def __init__(self, config: RunConfig, index: int, distribution: TaskKnobs, settings: PpoSettings,
                  torch_rng: Any = None) -> None:
         import torch
-        from stable_baselines3.common.vec_env import VecNormalize
 
         from myo_sds.envs.task_specs import TASK_SPECS
         from myo_sds.threads import available_cpus
-        from myo_sds.training.factory import apply_ppo_settings, build_model, env_factory
         from myo_sds.vec_env import ThreadVecEnv
 
         torch.set_num_threads(1)  # inference on a few dozen observations; the CPUs step envs
@@ -112,10 +127,7 @@ class RolloutWorker:
         k = config.rollout.envs_per_worker or config.n_envs
         first = index * k
         factories = [env_factory(config.curriculum.task, distribution, config.seed + first + rank) for rank in range(k)]
-        norm = config.normalize
-        self.venv = VecNormalize(ThreadVecEnv(factories, min(config.env_threads or available_cpus(), k)),
-                                 norm_obs=norm.observations, norm_reward=norm.rewards, clip_obs=norm.clip_obs,
-                                 clip_reward=norm.clip_reward, gamma=config.ppo.gamma)
+        self.venv = normalized(config, ThreadVecEnv(factories, min(config.env_threads or available_cpus(), k)))
         self.model = build_model(config, self.venv, settings)
         self.venv.seed(config.seed + first)  # the model's constructor seeded them from the run's seed
         apply_ppo_settings(self.model, settings)
@@ -125,11 +137,9 @@ class RolloutWorker:
         self.callback.init_callback(self.model)
 
     def rollout(self, weights: dict[str, Any], obs_rms: Any, ret_rms: Any, settings: PpoSettings,
-                stage_index: int) -> dict[str, Any]:
+                stage_index: int) -> RolloutResult:
         """One rollout of ``settings.n_steps`` steps per env with the learner's weights and
         normalization statistics."""
-        from myo_sds.training.factory import apply_ppo_settings
-
         model, venv = self.model, self.venv
         model.policy.load_state_dict(weights)
         apply_ppo_settings(model, settings)
@@ -141,14 +151,13 @@ class RolloutWorker:
         prepare_rollout(model, model.n_steps * venv.num_envs, callback)
         model.collect_rollouts(venv, callback, model.rollout_buffer, n_rollout_steps=model.n_steps)
         buffer = model.rollout_buffer
-        return {
-            "buffer": {name: getattr(buffer, name).copy() for name in BUFFER_FIELDS},
-            "obs_rms": copy.deepcopy(venv.obs_rms), "ret_rms": copy.deepcopy(venv.ret_rms),
-            "obs_added": Moments.of(venv.obs_rms).added_since(start_obs),
-            "ret_added": Moments.of(venv.ret_rms).added_since(start_ret),
-            "episodes": callback.episodes, "term_sums": callback.term_sums, "term_count": callback.term_count,
-            "seconds": time.perf_counter() - callback.started_at,
-        }
+        return RolloutResult(
+            buffer={name: getattr(buffer, name).copy() for name in BUFFER_FIELDS},
+            obs_rms=copy.deepcopy(venv.obs_rms), ret_rms=copy.deepcopy(venv.ret_rms),
+            obs_added=Moments.of(venv.obs_rms).added_since(start_obs),
+            ret_added=Moments.of(venv.ret_rms).added_since(start_ret),
+            episodes=callback.episodes, term_sums=callback.term_sums, term_count=callback.term_count,
+            seconds=time.perf_counter() - callback.started_at)
 
     def set_stage(self, distribution: TaskKnobs) -> None:
         self.venv.env_method("configure", distribution=distribution)

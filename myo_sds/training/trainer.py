@@ -198,9 +198,11 @@ class CurriculumTrainer:
     # the loop ----------------------------------------------------------------------------
 
     def apply_ppo_settings(self) -> None:
-        """Give the model the PPO settings in force at the current stage and step."""
-        apply_ppo_settings(self.model, ppo_settings_at(self.config, self.state.stage_index, self.state.stage_starts(),
-                                                       int(self.model.num_timesteps)))
+        """Give the model (and the rollouts) the PPO settings in force at the current stage and step."""
+        settings = ppo_settings_at(self.config, self.state.stage_index, self.state.stage_starts(),
+                                   int(self.model.num_timesteps))
+        apply_ppo_settings(self.model, settings)
+        self.rollouts.set_ppo_settings(settings)
 
     def run(self, max_wall_s: float | None = None) -> CurriculumState:
         """Train until the curriculum completes or stops, the step budget is spent, or a
