@@ -21,9 +21,7 @@ import mujoco
 import numpy as np
 
 from myo_sds.envs import TASKS
-
-OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p2"): "myoChallengeBaodingP2-v1",
-                ("die", "p1"): "myoChallengeDieReorientP1-v0", ("die", "p2"): "myoChallengeDieReorientP2-v0"}
+from myo_sds.envs.task_specs import TASK_SPECS
 
 
 def _env_loop(env, actions: np.ndarray, episode_ends: list[int] | None = None) -> Callable[[], None]:
@@ -72,7 +70,7 @@ def measure(steps: int = 3000, rounds: int = 3, preset: str = "p1", task: str = 
         import gymnasium as gym
         import myosuite  # noqa: F401  (registers the official ids)
 
-        contenders["official"] = _env_loop(gym.make(OFFICIAL_IDS[(task, preset)]).unwrapped, actions)
+        contenders["official"] = _env_loop(gym.make(TASK_SPECS[task].official_ids[preset]).unwrapped, actions)
     except ImportError:
         pass
     best = {name: 0.0 for name in contenders}

@@ -28,6 +28,7 @@ from myo_sds.envs.knobs import (
     to_float,
     weights,
 )
+from myo_sds.envs.registry import TaskSpec, solved_fraction
 
 MODEL_FILE = "myohand_baoding.xml"
 HORIZON = 200  # control steps of 25 ms: a 5 s episode
@@ -163,3 +164,18 @@ class BaodingKnobs(TaskKnobs):
         default_factory=lambda: {"pos_dist_1": 5.0, "pos_dist_2": 5.0}, parse=weights(REWARD_TERMS),
         help=f"mapping term -> weight over {', '.join(REWARD_TERMS)}")
 
+
+def _official_2022_start(env) -> None:
+    """MyoSuite 3.0.0's P1 env with the 2022 phase-1 start (P1 keeps these through every reset)."""
+    env.ball_1_starting_angle, env.ball_2_starting_angle = ON_BALLS_START_ANGLE, ON_BALLS_START_ANGLE - math.pi
+
+
+SPEC = TaskSpec(
+    name="baoding", knobs=BaodingKnobs, reward_terms=REWARD_TERMS, env_path="myo_sds.envs.baoding:BaodingEnv",
+    episode_score=solved_fraction, gym_name="Baoding",
+    official_ids={"p1": "myoChallengeBaodingP1-v1", "p1_2022": "myoChallengeBaodingP1-v1",
+                  "p2": "myoChallengeBaodingP2-v1"},
+    official_setup={"p1_2022": _official_2022_start},
+    preset_notes={"p1": "targets start at pi/4, 90 deg behind the balls (MyoSuite 3.0.0)",
+                  "p1_2022": "targets start at 3pi/4, on the resting balls (the 2022 phase-1 leaderboard)",
+                  "p2": "random start angle (P2)"})

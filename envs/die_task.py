@@ -10,6 +10,9 @@ from dataclasses import asdict, dataclass
 from typing import Any, ClassVar
 
 from myo_sds.envs.knobs import Range, TaskKnobs, check_complete, knob, parse_range, ranged, scalar, to_float, weights
+from myo_sds.envs.registry import TaskSpec, solved_on_more_than
+
+SUCCESS_STEPS = 5  # an episode succeeds when solved on more steps than this
 
 MODEL_FILE = "myohand_die.xml"
 HORIZON = 150  # control steps of 10 ms
@@ -84,3 +87,8 @@ class DieKnobs(TaskKnobs):
         default_factory=lambda: {"pos_dist": 100.0, "rot_dist": 1.0, "bonus": 0.0, "act_reg": 0.0, "penalty": 0.0},
         parse=weights(REWARD_TERMS), help=f"mapping term -> weight over {', '.join(REWARD_TERMS)}")
 
+
+SPEC = TaskSpec(
+    name="die", knobs=DieKnobs, reward_terms=REWARD_TERMS, env_path="myo_sds.envs.die:DieEnv",
+    episode_score=solved_on_more_than(SUCCESS_STEPS), gym_name="Die",
+    official_ids={"p1": "myoChallengeDieReorientP1-v0", "p2": "myoChallengeDieReorientP2-v0"})

@@ -271,8 +271,10 @@ class MuscleHandEnv(gym.Env):
         """A visual-only sphere in a rendered frame (nothing if the scene is full)."""
         if scene.ngeom >= scene.maxgeom:
             return
-        mujoco.mjv_initGeom(scene.geoms[scene.ngeom], mujoco.mjtGeom.mjGEOM_SPHERE, np.array([radius, 0, 0]),
+        geom = scene.geoms[scene.ngeom]
+        mujoco.mjv_initGeom(geom, mujoco.mjtGeom.mjGEOM_SPHERE, np.array([radius, 0, 0]),
                             np.asarray(position, dtype=np.float64), np.eye(3).ravel(), np.asarray(rgba, np.float32))
+        geom.objtype, geom.objid = int(mujoco.mjtObj.mjOBJ_UNKNOWN), -1  # initGeom leaves them unset
         scene.ngeom += 1
 
     def _set_state(self, state: Mapping[str, Any]) -> None:

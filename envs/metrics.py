@@ -15,7 +15,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-DIE_SUCCESS_STEPS = 5  # a die episode succeeds when solved on more steps than this
 PHASE_SECTOR_DEG = 45  # Baoding phases (the targets' angle on their orbit) are reported in sectors this wide
 PHASE_SECTORS = 360 // PHASE_SECTOR_DEG
 
@@ -51,11 +50,10 @@ class EpisodeResult:
 
     @property
     def score(self) -> float:
-        """Official per-episode score of the task."""
-        if self.task == "die":
-            return float(self.solved_steps > DIE_SUCCESS_STEPS)
-        return self.solved_steps / self.horizon
+        """Official per-episode score of the task (its registered rule)."""
+        from myo_sds.envs.task_specs import TASK_SPECS
 
+        return TASK_SPECS[self.task].episode_score(self.solved_steps, self.horizon)
 
     def to_dict(self) -> dict:
         return {**asdict(self), "score": self.score}

@@ -1,39 +1,20 @@
-"""The tasks a curriculum may name: their knobs and reward terms, without the simulator.
+"""The tasks a curriculum may name: the bundled ones, each registered once with everything the
+pipeline needs to know of it (:class:`~myo_sds.envs.registry.TaskSpec`: knobs and presets,
+reward terms, env class, official score rule, official env ids). Imports no simulator: config
+validation reads these before MuJoCo and torch load.
 
-Config validation reads these, so a bad curriculum is reported before MuJoCo and torch load;
-:meth:`TaskSpec.env_class` imports the env itself when one is built.
+Adding a task is one module declaring its ``TaskSpec`` (its knobs, task instance and env, as
+``baoding_task.py`` and ``baoding.py`` do) and one line: its spec in ``BUNDLED`` below, or a
+:func:`register_task` call of one's own before the curriculum is read.
 """
 
 from __future__ import annotations
 
-import importlib
-from dataclasses import dataclass
-
 from myo_sds.envs import baoding_task, die_task
-from myo_sds.envs.knobs import TaskKnobs
+from myo_sds.envs.registry import TASK_SPECS, TaskSpec, register_task
 
+BUNDLED = (baoding_task.SPEC, die_task.SPEC)
+for _spec in BUNDLED:
+    register_task(_spec)
 
-@dataclass(frozen=True)
-class TaskSpec:
-    """What a curriculum needs to know of a task.
-
-    Attributes:
-        knobs: the task's knob dataclass: ``knobs.help()`` names and explains each knob,
-            ``knobs.parse(preset, **written)`` checks and reads them.
-        reward_terms: names of the reward terms the env reports in ``info``.
-        env_path: ``"module:Class"`` of the env.
-    """
-
-    knobs: type[TaskKnobs]
-    reward_terms: tuple[str, ...]
-    env_path: str
-
-    def env_class(self) -> type:
-        module, name = self.env_path.split(":")
-        return getattr(importlib.import_module(module), name)
-
-
-TASK_SPECS: dict[str, TaskSpec] = {
-    "baoding": TaskSpec(baoding_task.BaodingKnobs, baoding_task.REWARD_TERMS, "myo_sds.envs.baoding:BaodingEnv"),
-    "die": TaskSpec(die_task.DieKnobs, die_task.REWARD_TERMS, "myo_sds.envs.die:DieEnv"),
-}
+__all__ = ["BUNDLED", "TASK_SPECS", "TaskSpec", "register_task"]

@@ -359,7 +359,7 @@ def test_render_draws_each_target_as_a_sphere_of_the_solved_radius_coloured_by_i
 
     frame = env.render()
     added(env._renderer.scene)
-    spheres = [g for g in scene_geoms[-2:] if g.type == int(mujoco.mjtGeom.mjGEOM_SPHERE) and g.objtype == 0]  # no model object
+    spheres = [g for g in scene_geoms[-2:] if g.type == int(mujoco.mjtGeom.mjGEOM_SPHERE) and g.objid == -1]  # no model object
     assert len(spheres) == 2 and frame.shape == (480, 640, 3)
     obs = env._obs
     for sphere, (target, offset) in zip(spheres, ((35, 41), (38, 44))):

@@ -4,7 +4,6 @@ table (``table``), plots (``plots``) and a video (``video``)."""
 
 from myo_sds.envs.metrics import phase_sector, sector_name
 from myo_sds.evaluation.checkpoints import (
-    OFFICIAL_IDS,
     CheckpointRef,
     EnvChoice,
     EvaluationError,
@@ -30,7 +29,7 @@ from myo_sds.evaluation.summary import RunSummary, StageSummary, format_summary,
 from myo_sds.evaluation.table import format_table
 from myo_sds.evaluation.video import chosen_episodes, record_video
 
-__all__ = ["OFFICIAL_IDS", "CheckpointRef", "EnvChoice", "EvaluationError", "EvaluationReport", "LoadedPolicy",
+__all__ = ["CheckpointRef", "EnvChoice", "EvaluationError", "EvaluationReport", "LoadedPolicy",
            "choose_env", "chosen_episodes", "evaluate", "format_table", "load_policy", "per_start_phase",
            "per_target_phase", "phase_sector", "plot_learning_curve", "plot_score_histogram", "record_video", "resolve_checkpoint",
            "run_episode", "run_task", "sector_name", "trailing_mean", "RunSummary", "StageSummary", "format_summary",

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -15,16 +14,6 @@ from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.published import archive_spaces, load_statistics, published_files
 from myo_sds.run_folder import RunFolder, statistics_beside
 
-OFFICIAL_IDS = {("baoding", "p1"): "myoChallengeBaodingP1-v1", ("baoding", "p1_2022"): "myoChallengeBaodingP1-v1",
-                ("baoding", "p2"): "myoChallengeBaodingP2-v1",
-                ("die", "p1"): "myoChallengeDieReorientP1-v0", ("die", "p2"): "myoChallengeDieReorientP2-v0"}
-# The 2022 phase-1 start on MyoSuite 3.0.0's P1 env: its ball_1/ball_2 starting angles, set before
-# reset (myosuite <= 1.2.2 started the targets there, on the resting balls).
-OFFICIAL_START_ANGLES = {("baoding", "p1_2022"): (3 * math.pi / 4, -math.pi / 4)}
-# What each preset's start is, for the printed table and the JSON.
-START_NOTES = {"p1": "targets start at pi/4, 90 deg behind the balls (MyoSuite 3.0.0)",
-               "p1_2022": "targets start at 3pi/4, on the resting balls (the 2022 phase-1 leaderboard)",
-               "p2": "random start angle (P2)"}
 _OFFICIAL_DIRECTIONS = ("hold", "cw", "ccw")  # myosuite's Task enum values 0, 1, 2
 
 
@@ -176,7 +165,7 @@ def choose_env(ref: CheckpointRef, name: str, official: bool = False) -> EnvChoi
         choice = EnvChoice(task, name, stage.distribution, official)
     else:
         raise EvaluationError(f"--env {name!r}: expected one of {', '.join(presets)} or stage:NAME")
-    if official and (task, name) not in OFFICIAL_IDS:
+    if official and name not in TASK_SPECS[task].official_ids:
         raise EvaluationError(f"no official env for {task} {name}")
     return choice
 

@@ -28,9 +28,6 @@ from myo_sds.envs.metrics import (
 from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.evaluation.checkpoints import (
     _OFFICIAL_DIRECTIONS,
-    OFFICIAL_IDS,
-    OFFICIAL_START_ANGLES,
-    START_NOTES,
     CheckpointRef,
     EnvChoice,
     EvaluationError,
@@ -60,7 +57,8 @@ class EvaluationReport:
             "run_dir": str(self.checkpoint.run_dir) if self.checkpoint.run_dir else None,
             "env": self.env.name,
             "official_env": self.env.official,
-            "start": START_NOTES.get(self.env.name, "the stage's own start" if self.env.name.startswith("stage:") else ""),
+            "start": TASK_SPECS[self.env.task].preset_notes.get(
+                self.env.name, "the stage's own start" if self.env.name.startswith("stage:") else ""),
             "seed": self.seed,
             "episodes": len(self.episodes),
             "score": official_score(self.episodes),
@@ -115,10 +113,10 @@ def make_env(choice: EnvChoice, render: bool = False):
             import myosuite  # noqa: F401  (registers the official ids)
         except ImportError:
             raise EvaluationError("--official needs the myosuite package: pip install myosuite==3.0.0") from None
-        env = gym.make(OFFICIAL_IDS[(choice.task, choice.name)])
-        angles = OFFICIAL_START_ANGLES.get((choice.task, choice.name))
-        if angles is not None:  # P1 keeps these through every reset (only P2 draws them)
-            env.unwrapped.ball_1_starting_angle, env.unwrapped.ball_2_starting_angle = angles
+        spec = TASK_SPECS[choice.task]
+        env = gym.make(spec.official_ids[choice.name])
+        if choice.name in spec.official_setup:
+            spec.official_setup[choice.name](env.unwrapped)
         return env
     return TASK_SPECS[choice.task].env_class()(render_mode="rgb_array" if render else None,
                                                distribution=choice.distribution)
