@@ -61,7 +61,7 @@ def run_reference(steps: int, n_envs: int) -> dict[str, float]:
     from sb3_contrib import RecurrentPPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
-    from myo_sds.curricula.schema import PolicyConfig, PpoConfig
+    from myo_sds.curricula.settings import PolicyConfig, PpoConfig
 
     policy, ppo = PolicyConfig(), PpoConfig()
     inner = SubprocVecEnv([_official_env for _ in range(n_envs)])

@@ -12,7 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from myo_sds.curricula.schema import LearningRateDecay, RunConfig
+from myo_sds.curricula.schema import RunConfig
+from myo_sds.curricula.settings import LearningRateDecay
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,6 @@ CURRICULUM_FILE = "curriculum.yaml"
 STATE_FILE = "curriculum_state.json"
 EPISODES_FILE = "episodes.csv"
 CHECKPOINT_DIR = "checkpoints"
-LATEST_FILE = "latest.json"
 FINAL_MODEL = "final_model.zip"
 FINAL_VECNORMALIZE = "final_vecnormalize.pkl"
 COMMAND_FILE = "command.txt"
@@ -325,7 +324,6 @@ class RunFolder:
         _atomic_save(files.vecnormalize, lambda tmp: venv.save(str(tmp)))
         _atomic_save(files.random_state, lambda tmp: tmp.write_bytes(pickle.dumps(random_state)))
         atomic_write_text(files.state, state.to_json())
-        atomic_write_text(self.checkpoint_dir / LATEST_FILE, json.dumps({"steps": state.num_timesteps}))
         atomic_write_text(self.state_file, state.to_json())
         for old in self.checkpoint_steps()[:-keep]:
             for path in self.checkpoint(old):

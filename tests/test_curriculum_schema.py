@@ -7,13 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from myo_sds.curricula.schema import (
-    ConfigError,
-    LearningRateDecay,
-    PpoWarmup,
-    load_curriculum,
-    load_run_config,
-)
+from myo_sds.curricula.schema import ConfigError, load_curriculum, load_run_config
+from myo_sds.curricula.settings import LearningRateDecay, PpoWarmup
 
 REPO = Path(__file__).resolve().parents[1]
 

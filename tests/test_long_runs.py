@@ -117,7 +117,7 @@ def test_a_stop_during_an_update_ends_it_before_the_next_minibatch(tmp_path):
     def count_and_signal_after_the_third(*args) -> None:
         steps_taken.append(1)
         if len(steps_taken) == 3:
-            trainer.collector.stop_requested = "SIGINT"  # what the SIGINT handler does
+            trainer.episode_callback.stop_requested = "SIGINT"  # what the SIGINT handler does
 
     trainer.model.policy.optimizer.register_step_post_hook(count_and_signal_after_the_third)
     state = trainer.run()

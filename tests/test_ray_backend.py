@@ -70,7 +70,7 @@ def test_two_workers_train_through_a_killed_worker_and_resume_on_either_backend(
     trainer = CurriculumTrainer.start(write_config(folder, total=1024), overrides, run_dir=folder / "run",
                                       progress=False)
     pid = ray.get(trainer.rollouts.workers[1].pid.remote())
-    rollout_start = trainer.collector._on_rollout_start
+    rollout_start = trainer.episode_callback._on_rollout_start
 
     def kill_workers_during_rollouts() -> None:
         rollout_start()
@@ -79,7 +79,7 @@ def test_two_workers_train_through_a_killed_worker_and_resume_on_either_backend(
         if trainer.model.num_timesteps == 512:  # worker 0, through Ray
             threading.Timer(0.05, ray.kill, (trainer.rollouts.workers[0],), {"no_restart": False}).start()
 
-    trainer.collector._on_rollout_start = kill_workers_during_rollouts
+    trainer.episode_callback._on_rollout_start = kill_workers_during_rollouts
     state = trainer.run()
     assert state.status is RunStatus.BUDGET_REACHED and state.num_timesteps == 1024
     assert trainer.rollouts.restarts == 2
@@ -116,14 +116,14 @@ def test_a_worker_that_keeps_dying_stops_the_run_with_a_checkpoint(tmp_path, cap
     overrides = ("rollout.backend=ray", "rollout.workers=1", "rollout.max_restarts=0")
     trainer = CurriculumTrainer.start(write_config(tmp_path, total=100_000), overrides, run_dir=tmp_path / "run",
                                       progress=False)
-    rollout_start = trainer.collector._on_rollout_start
+    rollout_start = trainer.episode_callback._on_rollout_start
 
     def kill_at_the_third_rollout() -> None:
         rollout_start()
         if trainer.model.num_timesteps == 256:
             threading.Timer(0.05, ray.kill, (trainer.rollouts.workers[0],), {"no_restart": False}).start()
 
-    trainer.collector._on_rollout_start = kill_at_the_third_rollout
+    trainer.episode_callback._on_rollout_start = kill_at_the_third_rollout
     state = trainer.run()
     trainer.close()
     assert state.status is RunStatus.INTERRUPTED and state.num_timesteps == 256

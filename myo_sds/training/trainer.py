@@ -89,10 +89,10 @@ class CurriculumTrainer:
         self.timings: list[RolloutTiming] = []
         self.iteration_started_at = time.perf_counter()
         self.update_threads = UpdateThreads(available_cpus(), fixed=config.num_threads or None)
-        self.collector = EpisodeCollector(config.n_envs, state.stage_index, TASK_SPECS[config.curriculum.task].reward_terms,
+        self.episode_callback = EpisodeCollector(config.n_envs, state.stage_index, TASK_SPECS[config.curriculum.task].reward_terms,
                                           run_wall_s=lambda: self.state.wall_s + time.perf_counter() - self.iteration_started_at,
                                           update_threads=self.update_threads)
-        self.minibatch_hook = model.policy.optimizer.register_step_pre_hook(self.collector.before_optimizer_step)
+        self.minibatch_hook = model.policy.optimizer.register_step_pre_hook(self.episode_callback.before_optimizer_step)
         self.apply_ppo_settings()
 
     @property
@@ -208,12 +208,12 @@ class CurriculumTrainer:
         """Train until the curriculum completes or stops, the step budget is spent, or a
         SIGINT/SIGTERM arrives or this call has trained for ``max_wall_s`` seconds (then a
         checkpoint is written and the run can be resumed)."""
-        config, model, state, collector = self.config, self.model, self.state, self.collector
-        collector.progress_bar = self.progress_bar
+        config, model, state, episode_callback = self.config, self.model, self.state, self.episode_callback
+        episode_callback.progress_bar = self.progress_bar
         previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
 
         def request_stop(signum, frame):
-            collector.stop_requested = signal.Signals(signum).name
+            episode_callback.stop_requested = signal.Signals(signum).name
             signal.signal(signal.SIGINT, signal.default_int_handler)  # a second Ctrl-C aborts
 
         for sig in previous:
@@ -221,7 +221,7 @@ class CurriculumTrainer:
         start_wall = state.wall_s
         # SB3's setup for training: the callback, and the first reset (or the LSTM states of a
         # loaded model); the trainer then drives rollouts and updates itself.
-        callback = start_training(model, config.total_steps, collector)
+        callback = start_training(model, config.total_steps, episode_callback)
         try:
             self._start_stage_display()
             while state.status is RunStatus.RUNNING:
@@ -242,9 +242,9 @@ class CurriculumTrainer:
                                             f"`python train.py --resume {self.run_dir}`")
                     break
                 self._after_rollout()
-                if collector.stop_requested:
+                if episode_callback.stop_requested:
                     state.status = RunStatus.INTERRUPTED
-                    self.progress_bar.write(f"{collector.stop_requested}: saving a checkpoint; continue with "
+                    self.progress_bar.write(f"{episode_callback.stop_requested}: saving a checkpoint; continue with "
                                             f"`python train.py --resume {self.run_dir}`")
                     break
                 self.progress_bar.describe(state.measured, self._rule_text(), model.num_timesteps)
@@ -262,10 +262,10 @@ class CurriculumTrainer:
 
     def _iterate(self) -> None:
         """One rollout and, unless a stop cut the rollout short, one PPO update."""
-        model, collector = self.model, self.collector
+        model, episode_callback = self.model, self.episode_callback
         steps_before, self.iteration_started_at = model.num_timesteps, time.perf_counter()
         env_before = self.rollouts.env_seconds
-        complete = self.rollouts.collect(model, collector)
+        complete = self.rollouts.collect(model, episode_callback)
         updated_at = time.perf_counter()
         if complete:
             try:
@@ -290,8 +290,8 @@ class CurriculumTrainer:
                                       self.config.total_steps)
 
     def _after_rollout(self) -> None:
-        model, state, collector = self.model, self.state, self.collector
-        results = collector.pop_results()
+        model, state, episode_callback = self.model, self.state, self.episode_callback
+        results = episode_callback.pop_results()
         rule = self.stage.advance
         metric = rule.metric if rule else "score"
         window = rule.window if rule else 100
@@ -300,7 +300,7 @@ class CurriculumTrainer:
             EpisodeRecord(step, wall_s, state.stage_index, self.stage.name, r.score, r.solved_steps, r.length,
                           r.dropped, r.effort, r.direction, r.start_phase) for step, wall_s, r in results)
         logger = model.logger
-        for key, value in collector.pop_term_means().items():
+        for key, value in episode_callback.pop_term_means().items():
             logger.record(f"reward/{key}", value)
         if results:
             episodes = [r for _, _, r in results]
@@ -344,7 +344,7 @@ class CurriculumTrainer:
             self.progress_bar.write("curriculum completed")
             return
         state.begin_next_stage()
-        self.collector.stage_index = state.stage_index
+        self.episode_callback.stage_index = state.stage_index
         self.rollouts.set_stage(self.stage.distribution)
         self.apply_ppo_settings()
         self._start_stage_display()
