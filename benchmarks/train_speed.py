@@ -1,10 +1,14 @@
 """Training throughput: ours against the 2022 winner's setup and the bare-physics ceiling.
 
     python benchmarks/train_speed.py [--steps 8192] [--config configs/baoding_sds.yaml] [--json FILE]
+    python benchmarks/train_speed.py --config configs/baoding_p1_2022.yaml --reference-from-config
 
 - reference: the winner's setup: myosuite's official Baoding P1 env in a SubprocVecEnv with one
-  env per core, sb3-contrib RecurrentPPO with the stock MlpLstmPolicy and the winner's
-  hyper-parameters (shared by ``PpoConfig`` / ``PolicyConfig`` defaults);
+  env per core, sb3-contrib RecurrentPPO with the stock MlpLstmPolicy and the winner's phase-2
+  hyper-parameters (shared by ``PpoConfig`` / ``PolicyConfig`` defaults); with
+  ``--reference-from-config``, stock sb3-contrib on the same recipe as ours (the config's
+  network, PPO settings and number of envs, one SubprocVecEnv process per env, as the 2022
+  phase-1 policy was trained);
 - ours: ``train.py``'s default Baoding config, on its first curriculum stage;
 - ceiling: bare ``mj_step`` physics (10 substeps per env step) in one process per core.
 
@@ -56,7 +60,9 @@ def _official_env():
     return gym.make("myoChallengeBaodingP1-v1")
 
 
-def run_reference(steps: int, n_envs: int) -> dict[str, float]:
+def run_reference(steps: int, n_envs: int, config: Path | None = None) -> dict[str, float]:
+    """Stock sb3-contrib on the official env: the winner's phase-2 settings with ``n_envs``
+    envs, or (``config``) that run config's policy, PPO settings and envs."""
     import torch
     from sb3_contrib import RecurrentPPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
@@ -64,6 +70,11 @@ def run_reference(steps: int, n_envs: int) -> dict[str, float]:
     from myo_sds.curricula.settings import PolicyConfig, PpoConfig
 
     policy, ppo = PolicyConfig(), PpoConfig()
+    if config is not None:
+        from myo_sds.curricula.schema import load_run_config
+
+        run = load_run_config(config)
+        policy, ppo, n_envs = run.policy, run.ppo, run.n_envs
     inner = SubprocVecEnv([_official_env for _ in range(n_envs)])
     venv = VecNormalize(inner, gamma=ppo.gamma)
     model = RecurrentPPO(
@@ -72,7 +83,8 @@ def run_reference(steps: int, n_envs: int) -> dict[str, float]:
         ent_coef=ppo.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, seed=0, device="cpu",
         policy_kwargs={"lstm_hidden_size": policy.lstm_hidden_size, "enable_critic_lstm": True,
                        "shared_lstm": False, "net_arch": {"pi": list(policy.net_arch), "vf": list(policy.net_arch)},
-                       "activation_fn": torch.nn.ReLU, "log_std_init": policy.log_std_init})
+                       "activation_fn": torch.nn.ReLU, "log_std_init": policy.log_std_init,
+                       "ortho_init": policy.ortho_init})
     try:
         return _timed_learn(model, inner, steps)
     finally:
@@ -132,6 +144,8 @@ def main() -> None:
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="override a value of ours' config, as train.py --set")
     parser.add_argument("--skip-reference", action="store_true")
+    parser.add_argument("--reference-from-config", action="store_true",
+                        help="the reference runs the config's own recipe with stock sb3-contrib")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     cores = os.cpu_count() or 1
@@ -142,8 +156,10 @@ def main() -> None:
     results["ours"]["overrides"] = args.overrides
     print(f"ours      ({args.config.name}): {results['ours']['steps_per_s']:7.0f} env steps/s", flush=True)
     if not args.skip_reference:
-        results["reference"] = run_reference(args.steps, cores)
-        print(f"reference (official env, SubprocVecEnv x{cores}, winner's PPO): "
+        recipe = args.config if args.reference_from_config else None
+        results["reference"] = run_reference(args.steps, cores, recipe)
+        results["reference"]["recipe"] = str(recipe) if recipe else "winner's phase-2 PPO, one env per core"
+        print(f"reference (official env, SubprocVecEnv, stock sb3-contrib, {results['reference']['recipe']}): "
               f"{results['reference']['steps_per_s']:7.0f} env steps/s", flush=True)
     ours = results["ours"]["steps_per_s"]
     results["ours/ceiling"] = ours / results["ceiling"]["steps_per_s"]

@@ -255,6 +255,30 @@ class RunFolder:
         target.state_file.write_text(state.to_json())
         return target
 
+    def export_resumable(self, destination: Path, checkpoint: CheckpointFiles | None = None) -> RunFolder:
+        """What ``--resume`` needs of the run, for another machine: config, curriculum,
+        provenance, and one checkpoint (default: the newest complete one) with its model,
+        optimizer, statistics, curriculum and random state; no episode log and no TensorBoard
+        events. An earlier export at ``destination`` is replaced (its checkpoints removed)."""
+        import shutil
+
+        checkpoint = checkpoint or self.latest_checkpoint()
+        if checkpoint is None:
+            raise FileNotFoundError(f"{self.path}: no complete checkpoint to export")
+        target = RunFolder(destination)
+        if target.checkpoint_dir.is_dir():
+            shutil.rmtree(target.checkpoint_dir)
+        target.checkpoint_dir.mkdir(parents=True)
+        for source, copy in ((self.config_file, target.config_file), (self.curriculum_file, target.curriculum_file),
+                             (self.command_file, target.command_file), (self.versions_file, target.versions_file),
+                             (checkpoint.state, target.state_file)):
+            if source.is_file():
+                shutil.copyfile(source, copy)
+        for path in checkpoint:
+            if path.is_file():
+                shutil.copyfile(path, target.checkpoint_dir / path.name)
+        return target
+
     @classmethod
     def require(cls, path: Path) -> RunFolder:
         """The run (or model) folder ``path`` names, else ``FileNotFoundError`` saying why."""

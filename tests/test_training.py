@@ -7,9 +7,11 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
+import torch
 import yaml
 from tiny_run import CONFIG, CURRICULUM, write_config
 
@@ -100,6 +102,47 @@ def test_time_limit_pauses_the_run_and_resume_continues_it(tmp_path):
     resumed = CurriculumTrainer.resume(run, progress=False)
     state = resumed.run(max_wall_s=1e-9)
     assert state.status == "time_limit" and state.num_timesteps == 256
+
+
+def test_a_resumable_export_continues_the_same_run_elsewhere(tmp_path, capsys):
+    """``--export RUN --to DIR --resumable``: one checkpoint, no logs; resumed on "another
+    machine" it trains exactly as the original run resumed from the same checkpoint."""
+    import shutil
+
+    from myo_sds.cli.train import main
+
+    config = write_config(tmp_path, total=100_000)
+    run = tmp_path / "run"
+    CurriculumTrainer.start(config, run_dir=run, progress=False).run(max_wall_s=1e-9)
+    second = CurriculumTrainer.resume(run, progress=False)
+    second.run(max_wall_s=1e-9)  # two checkpoints now, 128 and 256
+    second.close()
+    carried = tmp_path / "carried"
+    (carried / "checkpoints").mkdir(parents=True)
+    (carried / "checkpoints" / "rl_model_1_steps.zip").write_bytes(b"an older export's")
+    assert main(["--export", str(run), "--to", str(carried), "--resumable"]) == 0
+    assert "--resume" in capsys.readouterr().out
+    assert sorted(p.name for p in (carried / "checkpoints").iterdir()) == [
+        "curriculum_state_256_steps.json", "random_state_256_steps.pkl", "rl_model_256_steps.zip",
+        "rl_model_vecnormalize_256_steps.pkl"]
+    assert not (carried / "episodes.csv").exists() and not (carried / "tb").exists()
+    assert "1 easy" in (carried / "STATUS.txt").read_text()
+    elsewhere = tmp_path / "other_machine" / "run"
+    shutil.copytree(carried, elsewhere)
+    states = []
+    for folder in (run, elsewhere):
+        trainer = CurriculumTrainer.resume(folder, progress=False)
+        states.append(trainer.run(max_wall_s=1e-9))
+        trainer.close()
+        weights = trainer.model.policy.state_dict()
+        states.append(weights)
+    (original, original_weights), (moved, moved_weights) = zip(states[::2], states[1::2])
+    assert original.num_timesteps == moved.num_timesteps == 320  # stage 2 rolls out 64 steps
+    assert replace(original, wall_s=0.0) == replace(moved, wall_s=0.0)  # the same schedule and window
+    for name, tensor in original_weights.items():
+        assert torch.equal(tensor, moved_weights[name]), name
+    after = [(e.step, e.score, e.length) for e in RunFolder(run).read_episodes() if e.step > 256]
+    assert after == [(e.step, e.score, e.length) for e in RunFolder(elsewhere).read_episodes()] and after
 
 
 def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):

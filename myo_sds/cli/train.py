@@ -31,6 +31,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "state, config and curriculum to --to, for sharing")
     parser.add_argument("--to", type=Path, metavar="DIR", help="with --export: the model folder to write")
     parser.add_argument("--load-checkpoint", type=int, metavar="STEPS", help="with --export: that checkpoint")
+    parser.add_argument("--resumable", action="store_true",
+                        help="with --export: write what --resume needs (config, curriculum, one checkpoint with its "
+                             "optimizer, statistics, curriculum and random state) and the stage table, not a model "
+                             "folder; to carry a run to another machine")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="override a config value, e.g. --set n_envs=8 --set ppo.batch_size=256")
     parser.add_argument("--seed", type=int, help="same as --set seed=N")
@@ -82,6 +86,27 @@ def show_status(run_dir: Path, json_path: Path | None) -> int:
     return 0
 
 
+def export_resumable(run_dir: Path, destination: Path, steps: int | None) -> int:
+    from myo_sds.evaluation.summary import format_summary, summarize
+    from myo_sds.run_folder import RunFolder, atomic_write_text
+
+    try:
+        run = RunFolder.require(run_dir)
+        checkpoint = None if steps is None else run.checkpoint(steps)
+        if checkpoint is not None and not checkpoint.complete():
+            raise FileNotFoundError(f"{run_dir}: no complete checkpoint at {steps} steps")
+        target = run.export_resumable(destination, checkpoint)
+        # The run's stage table (its newest checkpoint's), with the hours its episode log gives.
+        table = format_summary(summarize(run.path))
+        atomic_write_text(target.path / "STATUS.txt", table + "\n")
+    except FileNotFoundError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    print(f"wrote {target.path}: continue with `python train.py --resume {target.path}` "
+          "(copy it out of a source tree first: a resumed run writes its logs there)")
+    return 0
+
+
 def export_model(run_dir: Path, destination: Path, steps: int | None) -> int:
     from myo_sds.evaluation.model_card import write_model_card
     from myo_sds.run_folder import RunFolder
@@ -105,6 +130,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.status:
         return show_status(args.status, args.json)
     if args.export:
+        if args.resumable:
+            return export_resumable(args.export, args.to, args.load_checkpoint)
         return export_model(args.export, args.to, args.load_checkpoint)
     from myo_sds.curricula.schema import load_run_config
     from myo_sds.run_folder import RunFolder
