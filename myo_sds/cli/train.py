@@ -86,7 +86,10 @@ def show_status(run_dir: Path, json_path: Path | None) -> int:
     return 0
 
 
-def export_resumable(run_dir: Path, destination: Path, steps: int | None) -> int:
+def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool) -> int:
+    """A model folder (with its model card) or, ``resumable``, what ``--resume`` needs of the
+    run (with its stage table), of the newest checkpoint or the one at ``steps``."""
+    from myo_sds.evaluation.model_card import write_model_card
     from myo_sds.evaluation.summary import format_summary, summarize
     from myo_sds.run_folder import RunFolder, atomic_write_text
 
@@ -95,33 +98,21 @@ def export_resumable(run_dir: Path, destination: Path, steps: int | None) -> int
         checkpoint = None if steps is None else run.checkpoint(steps)
         if checkpoint is not None and not checkpoint.complete():
             raise FileNotFoundError(f"{run_dir}: no complete checkpoint at {steps} steps")
-        target = run.export_resumable(destination, checkpoint)
-        # The run's stage table (its newest checkpoint's), with the hours its episode log gives.
-        table = format_summary(summarize(run.path))
-        atomic_write_text(target.path / "STATUS.txt", table + "\n")
+        if resumable:
+            target = run.export_resumable(destination, checkpoint)
+            # The run's stage table (its newest checkpoint's), with the hours its episode log gives.
+            atomic_write_text(target.path / "STATUS.txt", format_summary(summarize(run.path)) + "\n")
+        else:
+            target = run.export_model(destination, checkpoint)
+            write_model_card(target.path, run.path)
     except FileNotFoundError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    print(f"wrote {target.path}: continue with `python train.py --resume {target.path}` "
-          "(copy it out of a source tree first: a resumed run writes its logs there)")
-    return 0
-
-
-def export_model(run_dir: Path, destination: Path, steps: int | None) -> int:
-    from myo_sds.evaluation.model_card import write_model_card
-    from myo_sds.run_folder import RunFolder
-
-    try:
-        run = RunFolder.require(run_dir)
-        checkpoint = None if steps is None else run.checkpoint(steps)
-        if checkpoint is not None and not checkpoint.complete():
-            raise FileNotFoundError(f"{run_dir}: no complete checkpoint at {steps} steps")
-        target = run.export_model(destination, checkpoint)
-        write_model_card(target.path, run.path)
-    except FileNotFoundError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    print(f"wrote {target.path}: {', '.join(sorted(p.name for p in target.path.iterdir()))}")
+    if resumable:
+        print(f"wrote {target.path}: continue with `python train.py --resume {target.path}` "
+              "(copy it out of a source tree first: a resumed run writes its logs there)")
+    else:
+        print(f"wrote {target.path}: {', '.join(sorted(p.name for p in target.path.iterdir()))}")
     return 0
 
 
@@ -130,9 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.status:
         return show_status(args.status, args.json)
     if args.export:
-        if args.resumable:
-            return export_resumable(args.export, args.to, args.load_checkpoint)
-        return export_model(args.export, args.to, args.load_checkpoint)
+        return export(args.export, args.to, args.load_checkpoint, args.resumable)
     from myo_sds.curricula.schema import load_run_config
     from myo_sds.run_folder import RunFolder
 
