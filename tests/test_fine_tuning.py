@@ -46,3 +46,19 @@ def test_init_from_a_policy_of_another_shape_is_one_error_and_leaves_no_folder(t
         CurriculumTrainer.start(config, run_dir=tmp_path / "tuned", progress=False, init_from=tmp_path / "nothing")
     with pytest.raises(ConfigError, match="no such checkpoint"):
         CurriculumTrainer.start(config, run_dir=tmp_path / "tuned", progress=False, init_from=tmp_path / "x.zip")
+
+
+def test_the_model_card_of_a_fine_tuned_run_names_the_policy_it_started_from(tiny_run, tmp_path, monkeypatch):
+    import sys
+
+    from myo_sds.cli.train import main
+
+    assert main(["--export", str(tiny_run.path), "--to", str(tmp_path / "model")]) == 0
+    assert "did not start from scratch" not in (tmp_path / "model" / "README.md").read_text()
+    argv = ["train.py", "--config", str(write_config(tmp_path, total=128)), "--init-from", str(tmp_path / "model"),
+            "--run-dir", str(tmp_path / "tuned"), "--no-progress"]
+    monkeypatch.setattr(sys, "argv", argv)  # what the run's command.txt records
+    assert main(argv[1:]) == 0
+    assert main(["--export", str(tmp_path / "tuned"), "--to", str(tmp_path / "tuned_model")]) == 0
+    card = (tmp_path / "tuned_model" / "README.md").read_text()
+    assert f"it started from `{tmp_path / 'model'}` (`--init-from`" in card

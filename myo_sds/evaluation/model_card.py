@@ -15,6 +15,18 @@ def _stage_table(summary: RunSummary) -> list[str]:
     return ["| " + " | ".join(row) + " |" for row in (header, tuple("---" for _ in header), *rows)]
 
 
+def _started_from(folder: RunFolder) -> list[str]:
+    """A line naming the trained policy the run started from (``--init-from``), if it did."""
+    if not folder.command_file.is_file():
+        return []
+    words = folder.command_file.read_text().split()
+    if "--init-from" not in words[:-1]:
+        return []
+    source = words[words.index("--init-from") + 1]
+    return ["", f"**The run did not start from scratch**: it started from `{source}` (`--init-from`: its "
+            "weights, optimizer state and normalization statistics), then trained through the stages below."]
+
+
 def model_card(model_dir: Path, source_run: Path) -> str:
     """The card's Markdown for the exported folder ``model_dir`` of the run ``source_run``."""
     folder = RunFolder(model_dir)
@@ -26,6 +38,7 @@ def model_card(model_dir: Path, source_run: Path) -> str:
              f"RecurrentPPO policy exported from the run `{source_run.name}` at {summary.env_steps:,} env steps "
              f"({summary.wall_s / 3600:.2f} h of training, {where}), with its optimizer state, its "
              "normalization statistics and its curriculum state.",
+             *_started_from(folder),
              "",
              "## Stages",
              "",
