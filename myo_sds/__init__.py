@@ -19,6 +19,7 @@ other projects' in site-packages).
 
 from pathlib import Path as _Path
 
+from myo_sds.numerics import pin_kernels as _pin_kernels
 from myo_sds.threads import limit_openmp_spinning as _limit_openmp_spinning
 
 _PACKAGE = _Path(__file__).resolve().parent
@@ -26,6 +27,7 @@ if not (_PACKAGE / "envs").is_dir():  # a source checkout: the subpackages are a
     __path__.append(str(_PACKAGE.parent))  # noqa: F821  (the package's own search path)
 
 _limit_openmp_spinning()  # before anything imports torch
+_pin_kernels()  # the same results on every AVX2 CPU (myo_sds/numerics.py)
 
 
 def bundled_path(kind: str, name: str) -> _Path | None:

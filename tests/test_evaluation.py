@@ -280,13 +280,15 @@ def test_cli_plots_and_video_of_folders_without_an_episode_log(tmp_path, capsys)
 
     shipped, published = REPO / "models" / "baoding_p1", REPO / "models" / "reference" / "stiff_fingers_2022_p1"
     out = tmp_path / "out"
-    # The published policy drops the balls at step 47 of P1: a short video.
+    # The published policy drops the balls early in P1 (step 42-47, by the CPU): a short video.
     assert main([str(published), str(shipped), "--env", "p1", "--episodes", "1", "--plots", str(out),
-                 "--video", str(out / "v.mp4"), "--video-episodes", "1"]) == 0
+                 "--video", str(out / "v.mp4"), "--video-episodes", "1", "--json", str(out / "e.json")]) == 0
+    length = json.loads((out / "e.json").read_text())["reports"][0]["per_episode"][0]["length"]
+    assert length < 60
     printed = capsys.readouterr().out
     assert (out / "learning_curve_baoding_p1.png").read_bytes() == (shipped / "learning_curve.png").read_bytes()
     assert f"no learning curve for {published / 'phase1_final.zip'}: it is not inside a run" in printed
     assert (out / "score_histogram.png").is_file()
     import imageio.v3 as iio
 
-    assert iio.imread(out / "v.mp4").shape == (47 + 80, 480, 640, 3)
+    assert iio.imread(out / "v.mp4").shape == (length + 80, 480, 640, 3)

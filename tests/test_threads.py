@@ -94,21 +94,24 @@ def test_cgroup_v2_quota_is_read(tmp_path, content, expected):
     assert threads._cgroup_cpu_limit(root=tmp_path, proc_cgroup=proc) == expected
 
 
-def test_one_and_two_threads_give_bit_identical_lstm_gradients():
-    """The tuner may change threads between minibatches because this holds: runs stay reproducible."""
+def test_one_and_two_threads_give_bit_identical_lstm_outputs():
+    """A policy acts the same whatever the thread count (the forward pass splits no sums by
+    thread). Its gradients may not: on an AMD EPYC the LSTM weights' gradients differ in the
+    last bits between 1 and 2 threads (equal on the Intel Xeon), which is why a run whose
+    update had to change thread counts is reproducible only statistically (myo_sds/threads.py)."""
     import torch
 
-    def gradients(count: int) -> list[torch.Tensor]:
+    def outputs(count: int) -> tuple[torch.Tensor, torch.Tensor]:
         previous = torch.get_num_threads()
         torch.set_num_threads(count)
         try:
             torch.manual_seed(0)
             lstm = torch.nn.LSTM(86, 64)
             head = torch.nn.Sequential(torch.nn.Linear(64, 64), torch.nn.ReLU(), torch.nn.Linear(64, 39))
-            output, _ = lstm(torch.randn(64, 8, 86))
-            head(output).pow(2).sum().backward()
-            return [p.grad.clone() for p in [*lstm.parameters(), *head.parameters()]] + [output.detach()]
+            with torch.no_grad():
+                output, _ = lstm(torch.randn(64, 8, 86))
+                return output, head(output)
         finally:
             torch.set_num_threads(previous)
 
-    assert all(torch.equal(a, b) for a, b in zip(gradients(1), gradients(2)))
+    assert all(torch.equal(a, b) for a, b in zip(outputs(1), outputs(2)))

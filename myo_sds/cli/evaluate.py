@@ -81,11 +81,16 @@ def main(argv: list[str] | None = None) -> int:
             for choice in ref_choices:
                 print(f"evaluating {ref.label} on {choice.label}: {args.episodes} episodes ...", flush=True)
                 reports.append(ev.evaluate(ref, choice, args.episodes, args.seed, args.workers))
+        from myo_sds import numerics
+
+        machine = numerics.describe()
         print()
         print(ev.format_table(reports))
+        print(f"numerics {machine['fingerprint']} ({machine['cpu']}): a machine with the same fingerprint "
+              "replays these episodes bit for bit")
         if args.json:
             args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps({"reports": [r.summary() for r in reports]}, indent=2))
+            args.json.write_text(json.dumps({"numerics": machine, "reports": [r.summary() for r in reports]}, indent=2))
             print(f"\nwrote {args.json}")
         if args.plots:
             ev.plot_score_histogram(reports, args.plots / "score_histogram.png")

@@ -1,0 +1,38 @@
+"""Importing myo_sds pins MKL, torch and NumPy to their AVX2 kernels before they load, and the
+numerics fingerprint sees the kernel a policy's single-row products go through."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from myo_sds.numerics import KERNEL_PINS
+
+
+def _run(code: str, **env: str) -> str:
+    clean = {k: v for k, v in os.environ.items() if k not in KERNEL_PINS}
+    return subprocess.run([sys.executable, "-c", code], env={**clean, **env}, check=True,
+                          capture_output=True, text=True).stdout.strip()
+
+
+@pytest.mark.skipif(os.uname().machine != "x86_64", reason="the pins name x86-64 kernels")
+def test_importing_the_package_pins_the_kernels_before_torch_loads():
+    out = _run("import myo_sds, os, torch; print(os.environ['MKL_CBWR'], torch.backends.cpu.get_cpu_capability())")
+    assert out.split() == ["AVX2", "AVX2"]
+
+
+def test_a_user_setting_wins_over_the_pin():
+    assert _run("import myo_sds, os; print(os.environ['MKL_CBWR'])", MKL_CBWR="COMPATIBLE") == "COMPATIBLE"
+
+
+@pytest.mark.skipif(os.uname().machine != "x86_64", reason="the pins name x86-64 kernels")
+def test_the_fingerprint_repeats_and_follows_the_matrix_kernel():
+    code = "import myo_sds.numerics as n; print(n.fingerprint())"
+    pinned = _run(code)
+    assert pinned == _run(code) == _run(code, MKL_CBWR="AVX2")
+    assert len(pinned) == 12 and int(pinned, 16) >= 0
+    # MKL's compatible branch (no FMA) rounds a matrix-vector product differently.
+    assert _run(code, MKL_CBWR="COMPATIBLE") != pinned
