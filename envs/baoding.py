@@ -208,10 +208,43 @@ class BaodingEnv(MuscleHandEnv):
             self._balls_onto_targets()
 
     def _balls_onto_targets(self) -> None:
-        """Reference state initialization: each ball's centre on its target site, at rest."""
-        mujoco.mj_kinematics(self.model, self.data)
+        """Reference state initialization: each ball on its target site, at rest.
+
+        The ball's centre goes to the target's x and y; its height follows ``rsi_height``.
+        """
+        model, data, height = self.model, self.data, self.knobs.rsi_height
+        mujoco.mj_kinematics(model, data)
         for qadr, site in zip(self._ball_qpos, self._target_sites):
-            self.data.qpos[qadr:qadr + 3] = self.data.site_xpos[site]
+            data.qpos[qadr:qadr + 2] = data.site_xpos[site, :2]
+            if height != "rest":  # "rest" keeps the model's resting height, as the 2022 winner's env did
+                data.qpos[qadr + 2] = data.site_xpos[site, 2]
+        if height == "clear":
+            self._push_balls_clear()
+
+    def _push_balls_clear(self, tolerance: float = 1e-4, max_rounds: int = 50) -> None:
+        """Move each ball out of the hand until no contact of it is deeper than ``tolerance`` (m).
+
+        A ball started inside the palm or the thumb is thrown off the hand by the contact force
+        at the first step. Each round moves the ball by its deepest contact's depth along that contact's
+        normal (about the smallest move out of the hand), so it stays as close to its target as it can.
+        """
+        model, data = self.model, self.data
+        for _ in range(max_rounds):
+            mujoco.mj_fwdPosition(model, data)
+            contacts = data.contact
+            deepest = 0.0
+            for qadr, geom in zip(self._ball_qpos, self._ball_geoms):
+                touching = np.flatnonzero((contacts.geom == geom).any(axis=1))
+                if touching.size == 0:
+                    continue
+                i = touching[np.argmin(contacts.dist[touching])]
+                depth = -float(contacts.dist[i])
+                if depth > tolerance:
+                    normal = contacts.frame[i, :3]  # points from geom 1 to geom 2
+                    data.qpos[qadr:qadr + 3] += depth * (normal if contacts.geom[i, 1] == geom else -normal)
+                    deepest = max(deepest, depth)
+            if deepest <= tolerance:
+                return
 
     def _observe(self) -> np.ndarray:
         data, obs = self.data, self._obs

@@ -127,6 +127,41 @@ def test_rsi_puts_balls_on_targets():
     assert np.linalg.norm(obs[44:47]) == pytest.approx(0.037, abs=2e-3)
 
 
+def _deepest_ball_contact(env: BaodingEnv) -> float:
+    import mujoco
+    mujoco.mj_fwdPosition(env.model, env.data)
+    touching = (np.isin(env.data.contact.geom, env._ball_geoms)).any(axis=1)
+    return float(-env.data.contact.dist[touching].min(initial=0.0))
+
+
+def test_rsi_heights_place_the_balls_as_documented():
+    # At a start angle of 0 the target orbit passes through the thumb and the fifth finger:
+    # balls at their targets' height sit 3.5 and 7.1 mm inside the hand.
+    kwargs = dict(direction="hold", period="static", start_angle=0.0, rsi_probability=1.0)
+    on_target = BaodingEnv(rsi_height="target", **kwargs)
+    obs, _ = on_target.reset(seed=0)
+    assert np.linalg.norm(obs[41:44]) < 1e-9 and np.linalg.norm(obs[44:47]) < 1e-9
+    assert _deepest_ball_contact(on_target) == pytest.approx(0.0071, abs=5e-4)
+
+    clear = BaodingEnv(rsi_height="clear", **kwargs)
+    obs, _ = clear.reset(seed=0)
+    assert _deepest_ball_contact(clear) <= 1e-4
+    # moved out along the contact normal by about the depth, so still well inside the solved radius
+    assert np.linalg.norm(obs[41:44]) == pytest.approx(0.0035, abs=5e-4)
+    assert np.linalg.norm(obs[44:47]) == pytest.approx(0.0071, abs=5e-4)
+
+    rest = BaodingEnv(rsi_height="rest", **kwargs)
+    obs, _ = rest.reset(seed=0)
+    resting_height = rest.model.qpos0[[rest._ball_qpos[0] + 2, rest._ball_qpos[1] + 2]]
+    np.testing.assert_allclose(obs[[25, 31]], resting_height)  # each ball's height as at rest
+    np.testing.assert_allclose(obs[[41, 42, 44, 45]], 0.0, atol=1e-12)  # x and y on the targets
+
+
+def test_rsi_height_rejects_unknown_values():
+    with pytest.raises(ValueError, match="rsi_height.*clear.*target.*rest"):
+        BaodingEnv(rsi_height="floating")
+
+
 def test_rsi_probability_is_a_probability_over_episodes():
     env = BaodingEnv(rsi_probability=0.5)
     on_target = [np.linalg.norm(env.reset(seed=s)[0][41:44]) < 1e-3 for s in range(60)]
