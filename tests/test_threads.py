@@ -95,9 +95,10 @@ def test_cgroup_v2_quota_is_read(tmp_path, content, expected):
 
 
 def test_one_and_two_threads_give_bit_identical_lstm_outputs():
-    """A policy acts the same whatever the thread count (the forward pass splits no sums by
-    thread). Its gradients may not: on an AMD EPYC the LSTM weights' gradients differ in the
-    last bits between 1 and 2 threads (equal on the Intel Xeon), which is why a run whose
+    """A policy acts the same whatever the thread count: the LSTM over a rollout, and the heads
+    one time step at a time (as a policy acts, 8 envs per step), split no sums by thread. Larger
+    products may: on an Intel Xeon with the AVX2 pins the heads over all 512 rows at once differ
+    in the last bit, and on an AMD EPYC the LSTM weights' gradients do, which is why a run whose
     update had to change thread counts is reproducible only statistically (myo_sds/threads.py)."""
     import torch
 
@@ -110,7 +111,7 @@ def test_one_and_two_threads_give_bit_identical_lstm_outputs():
             head = torch.nn.Sequential(torch.nn.Linear(64, 64), torch.nn.ReLU(), torch.nn.Linear(64, 39))
             with torch.no_grad():
                 output, _ = lstm(torch.randn(64, 8, 86))
-                return output, head(output)
+                return output, torch.stack([head(step) for step in output])
         finally:
             torch.set_num_threads(previous)
 
