@@ -25,9 +25,19 @@ CAPTURED = ("observations", "actions", "rewards", "log_probs", "episode_starts",
 
 
 @pytest.fixture(scope="module", autouse=True)
-def local_cluster():
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    yield
+def local_cluster(tmp_path_factory):
+    """A local cluster whose workers have a temporary folder of their own (``worker_tmp``)."""
+    worker_tmp = tmp_path_factory.mktemp("worker_tmp")
+    before = os.environ.get("TMPDIR")
+    os.environ["TMPDIR"] = str(worker_tmp)  # the cluster's processes inherit it at start
+    try:
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    finally:
+        if before is None:
+            del os.environ["TMPDIR"]
+        else:
+            os.environ["TMPDIR"] = before
+    yield worker_tmp
     ray.shutdown()
 
 
@@ -48,10 +58,12 @@ def train(folder: Path, total: int, overrides: tuple[str, ...] = ()) -> tuple[Cu
     return trainer, rollouts
 
 
-def test_one_worker_collects_bit_identical_rollouts_to_the_local_backend(tmp_path):
+def test_one_worker_collects_bit_identical_rollouts_to_the_local_backend(tmp_path, local_cluster):
     local, expected = train(tmp_path / "local", 512)
     remote, got = train(tmp_path / "ray", 512, ("rollout.backend=ray", "rollout.workers=1"))
     remote.close()
+    # A worker logs nothing itself: no logger folder SB3 would make for it at every rollout.
+    assert not list(local_cluster.glob("SB3-*"))
     assert sorted(got) == sorted(expected) == [128, 256, 320, 384, 448, 512]  # a stage change at 256
     for step, arrays in expected.items():
         for name, array in arrays.items():

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
 
 from myo_sds.curricula.schedule import PpoSettings
 from myo_sds.curricula.schema import RunConfig
@@ -129,6 +130,9 @@ class RolloutWorker:
         factories = [env_factory(config.curriculum.task, distribution, config.seed + first + rank) for rank in range(k)]
         self.venv = normalized(config, ThreadVecEnv(factories, min(config.env_threads or available_cpus(), k)))
         self.model = build_model(config, self.venv, settings)
+        # The driver logs; without a logger of its own SB3 would make an empty /tmp/SB3-<date>
+        # folder at every rollout's set-up.
+        self.model.set_logger(Logger(folder=None, output_formats=[]))
         self.venv.seed(config.seed + first)  # the model's constructor seeded them from the run's seed
         apply_ppo_settings(self.model, settings)
         if torch_rng is not None:
