@@ -17,7 +17,8 @@ class Decision(enum.Enum):
     STAY = "stay"
     PASSED = "passed"  # threshold reached: go to the next stage
     TIMED_OUT = "timed_out"  # max_steps reached unpassed, on_max_steps: advance
-    STOP = "stop"  # max_steps reached unpassed, on_max_steps: stop
+    STOP = "stop"  # max_steps reached or plateaued unpassed, on_max_steps: stop
+    PLATEAUED = "plateaued"  # no gain for plateau_steps, on_max_steps: advance
 
 
 def episode_metric(metric: str, result: EpisodeResult) -> float:
@@ -34,7 +35,8 @@ def decide(rule: AdvanceRule | None, state: CurriculumState) -> Decision:
     """Whether the stage is passed, goes on, or ran out of steps.
 
     Passed needs a full window of episodes whose mean reaches the threshold, after at least
-    ``min_steps``. A stage without a rule never ends by itself.
+    ``min_steps``. Plateaued: ``plateau_steps`` env steps since the window's mean last rose
+    ``plateau_gain`` above its best. A stage without a rule never ends by itself.
     """
     if rule is None:
         return Decision.STAY
@@ -43,4 +45,7 @@ def decide(rule: AdvanceRule | None, state: CurriculumState) -> Decision:
         return Decision.PASSED
     if rule.max_steps is not None and state.stage_steps >= rule.max_steps:
         return Decision.TIMED_OUT if rule.on_max_steps == "advance" else Decision.STOP
+    if (rule.plateau_steps is not None and state.best_measured is not None and state.stage_steps >= rule.min_steps
+            and state.stage_steps - state.best_at_stage_step >= rule.plateau_steps):
+        return Decision.PLATEAUED if rule.on_max_steps == "advance" else Decision.STOP
     return Decision.STAY

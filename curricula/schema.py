@@ -39,7 +39,9 @@ ON_MAX_STEPS = ("advance", "stop")
 class AdvanceRule:
     """When a stage is passed: the mean ``metric`` over the last ``window`` training
     episodes of the stage reaches ``threshold``, after at least ``min_steps`` env steps.
-    After ``max_steps`` the stage ends unpassed and the run advances or stops."""
+    After ``max_steps``, or once the mean has not risen ``plateau_gain`` above its best for
+    ``plateau_steps`` env steps (with a full window, after ``min_steps``), the stage ends
+    unpassed and the run advances or stops (``on_max_steps``)."""
 
     metric: str = setting("score", one_of(*METRICS))
     threshold: float = setting(0.5, number(low=0, high=1))
@@ -47,6 +49,8 @@ class AdvanceRule:
     min_steps: int = setting(0, integer(low=0))
     max_steps: int | None = setting(None, optional(integer(low=1)))
     on_max_steps: str = setting("advance", one_of(*ON_MAX_STEPS))
+    plateau_steps: int | None = setting(None, optional(integer(low=1)))
+    plateau_gain: float = setting(0.01, number(low=0))
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ class Transition:
 
     stage: str
     stage_index: int
-    decision: str  # an advancement Decision's value: passed | timed_out | stop
+    decision: str  # an advancement Decision's value: passed | timed_out | plateaued | stop
     at_step: int  # the run's env step count when it happened
     stage_steps: int
     stage_episodes: int
@@ -59,6 +59,10 @@ class CurriculumState:
     status: RunStatus = RunStatus.RUNNING
     num_timesteps: int = 0
     wall_s: float = 0.0  # training wall time so far, over all sessions of the run
+    # The current stage's best full-window mean, counting only rises of the plateau gain, and
+    # the stage step it was reached at (None: not tracked, or no full window yet).
+    best_measured: float | None = None
+    best_at_stage_step: int = 0
 
     # the current stage ------------------------------------------------------------------
 
@@ -72,20 +76,26 @@ class CurriculumState:
         """The advancement metric: the mean of the window's values (nan before the first episode)."""
         return sum(self.recent) / len(self.recent) if self.recent else math.nan
 
-    def record(self, stage: str, num_timesteps: int, values: Iterable[float] = (), window: int | None = None) -> None:
+    def record(self, stage: str, num_timesteps: int, values: Iterable[float] = (), window: int | None = None,
+               plateau_gain: float | None = None) -> None:
         """The current stage ``stage`` is at env step ``num_timesteps``: add the metric values of
-        the episodes that ended since, keeping the last ``window``."""
+        the episodes that ended since, keeping the last ``window``; with ``plateau_gain``, a
+        full window's mean at least that much above the best so far becomes the best."""
         self.num_timesteps = num_timesteps
         for value in values:
             self.recent.append(float(value))
             self.stage_episodes += 1
         if window is not None:
             del self.recent[:-window]
+            full = len(self.recent) >= window
+            if plateau_gain is not None and full and (
+                    self.best_measured is None or self.measured >= self.best_measured + plateau_gain):
+                self.best_measured, self.best_at_stage_step = self.measured, self.stage_steps
         self.episodes_per_stage[stage] = self.stage_episodes
         self.steps_per_stage[stage] = self.stage_steps
 
     def end_stage(self, stage: str, decision: str, wall_s: float) -> Transition:
-        """Record the current stage's end (``decision``: passed | timed_out | stop)."""
+        """Record the current stage's end (``decision``: passed | timed_out | plateaued | stop)."""
         transition = Transition(stage, self.stage_index, decision, self.num_timesteps, self.stage_steps,
                                 self.stage_episodes, self.measured, wall_s)
         self.history.append(transition)
@@ -97,6 +107,7 @@ class CurriculumState:
         self.stage_start_step = self.num_timesteps
         self.stage_episodes = 0
         self.recent = []
+        self.best_measured, self.best_at_stage_step = None, 0
 
     # the whole run -------------------------------------------------------------------
 

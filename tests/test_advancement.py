@@ -3,6 +3,8 @@ simulator)."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from myo_sds.curricula.advancement import (
@@ -65,6 +67,56 @@ def test_max_steps_ends_the_stage_unpassed_or_stops():
     assert decide(stop, progress([0.1, 0.1], steps=1000)) is Decision.STOP
     # Passing wins over timing out at the same check.
     assert decide(stop, progress([0.95, 0.95], steps=1000)) is Decision.PASSED
+
+
+def plateau_run(means, rule, every=1_000):
+    """A stage whose window mean is ``means[k]`` at stage step ``(k + 1) * every`` (one
+    record per rollout, the window refilled with that mean); the decision after each."""
+    state = CurriculumState()
+    decisions = []
+    for k, mean in enumerate(means):
+        state.record("s", (k + 1) * every, [mean] * rule.window, rule.window,
+                     rule.plateau_gain if rule.plateau_steps is not None else None)
+        decisions.append(decide(rule, state))
+    return state, decisions
+
+
+def test_a_stage_without_gain_for_plateau_steps_ends_unpassed():
+    rule = AdvanceRule(threshold=0.9, window=2, plateau_steps=4_000, plateau_gain=0.05)
+    # Best 0.30 at 1k; 0.33, 0.34 and later 0.37-0.39 rise less than the gain, 0.36 at 5k more.
+    means = [0.30, 0.33, 0.34, 0.32, 0.36, 0.35, 0.37, 0.39]
+    state, decisions = plateau_run(means, rule)
+    assert (state.best_measured, state.best_at_stage_step) == (0.36, 5_000)
+    assert decisions == [Decision.STAY] * 8
+    # The stage ends 4,000 steps after its best, at 9k.
+    assert plateau_run(means + [0.38], rule)[1][-1] is Decision.PLATEAUED
+    # Without the rise at 5k it would have ended at 5k.
+    assert plateau_run([0.30, 0.33, 0.34, 0.32, 0.34], rule)[1][-1] is Decision.PLATEAUED
+    stop = AdvanceRule(threshold=0.9, window=2, plateau_steps=3_000, plateau_gain=0.05, on_max_steps="stop")
+    assert plateau_run([0.3, 0.3, 0.3, 0.3], stop)[1] == [Decision.STAY] * 3 + [Decision.STOP]
+    # A steadily rising stage never plateaus, and passing wins at the same check.
+    assert set(plateau_run([0.1 * k for k in range(1, 9)], rule)[1][:-1]) == {Decision.STAY}
+    assert plateau_run([0.3, 0.3, 0.3, 0.95], rule)[1][-1] is Decision.PASSED
+    # min_steps delays it; without plateau_steps nothing is tracked.
+    late = AdvanceRule(threshold=0.9, window=2, plateau_steps=3_000, min_steps=6_000)
+    assert plateau_run([0.3] * 6, late)[1] == [Decision.STAY] * 5 + [Decision.PLATEAUED]
+    untracked, decisions = plateau_run([0.3] * 20, AdvanceRule(threshold=0.9, window=2))
+    assert untracked.best_measured is None and set(decisions) == {Decision.STAY}
+
+
+def test_the_plateau_best_needs_a_full_window_and_restarts_with_each_stage():
+    state = CurriculumState()
+    state.record("s", 1_000, [0.5], window=2, plateau_gain=0.01)
+    assert state.best_measured is None  # 1 of 2 episodes
+    state.record("s", 2_000, [0.7], window=2, plateau_gain=0.01)
+    assert (state.best_measured, state.best_at_stage_step) == (0.6, 2_000)
+    assert CurriculumState.from_json(state.to_json()) == state
+    state.end_stage("s", Decision.PLATEAUED.value, wall_s=1.0)
+    state.begin_next_stage()
+    assert (state.best_measured, state.best_at_stage_step) == (None, 0)
+    # A checkpoint written before the plateau was kept reads back untracked.
+    old = {k: v for k, v in json.loads(state.to_json()).items() if not k.startswith("best_")}
+    assert CurriculumState.from_json(json.dumps(old)).best_measured is None
 
 
 def test_stage_without_rule_never_ends():

@@ -172,6 +172,19 @@ def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     assert steps == sorted(steps) and steps[-1] > 256
 
 
+def test_a_stage_that_stops_gaining_ends_on_its_plateau_rule(tmp_path):
+    # Stage 2 cannot gain 1.0 over its first full window: it ends 256 steps after that window.
+    curriculum = CURRICULUM.replace("threshold: 0.9, window: 8}", "threshold: 0.9, window: 8, plateau_steps: 256, plateau_gain: 1.0}")
+    state = CurriculumTrainer.start(write_config(tmp_path, total=100_000, curriculum=curriculum),
+                                    run_dir=tmp_path / "run", progress=False).run()
+    easy, hard = state.history
+    assert (easy.decision, hard.decision) == ("passed", "plateaued")
+    assert state.status == "completed" and hard.stage_steps < 2_000
+    episodes = [e for e in RunFolder(tmp_path / "run").read_episodes() if e.stage == "hard"]
+    window_full = episodes[7].step - easy.at_step  # the stage step of its 8th episode's rollout
+    assert 256 <= hard.stage_steps - window_full <= 256 + 32 * 2  # within a rollout (32 steps x 2 envs)
+
+
 def test_learning_rate_decay_follows_env_steps_across_stages_and_resume(tmp_path):
     run_decay = "{start: 1.0e-3, end: 1.0e-5, steps: 1024}"
     stage_decay = "{start: 2.0e-4, end: 2.0e-6, steps: 256}"

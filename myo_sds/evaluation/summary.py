@@ -24,7 +24,7 @@ BREAKDOWN_EPISODES = 2000  # the current stage's latest episodes, split by start
 class StageSummary:
     index: int  # from 1, as on the console
     name: str
-    status: str  # passed | timed_out | stop | current | not reached
+    status: str  # passed | timed_out | plateaued | stop | current | not reached
     env_steps: int
     wall_s: float
     episodes: int

@@ -295,7 +295,9 @@ class CurriculumTrainer:
         rule = self.stage.advance
         metric = rule.metric if rule else "score"
         window = rule.window if rule else 100
-        state.record(self.stage.name, int(model.num_timesteps), (episode_metric(metric, r) for _, _, r in results), window)
+        plateau_gain = rule.plateau_gain if rule and rule.plateau_steps is not None else None
+        state.record(self.stage.name, int(model.num_timesteps), (episode_metric(metric, r) for _, _, r in results),
+                     window, plateau_gain)
         self.folder.append_episodes(
             EpisodeRecord(step, wall_s, state.stage_index, self.stage.name, r.score, r.solved_steps, r.length,
                           r.dropped, r.effort, r.direction, r.start_phase) for step, wall_s, r in results)
@@ -332,6 +334,7 @@ class CurriculumTrainer:
         stage = self.stage
         measured = state.end_stage(stage.name, decision.value, state.wall_s).measured
         verdict = {Decision.PASSED: "passed", Decision.TIMED_OUT: "ended unpassed (max_steps)",
+                   Decision.PLATEAUED: "ended unpassed (plateau_steps without a gain of plateau_gain)",
                    Decision.STOP: "ended unpassed"}[decision]
         self.progress_bar.write(f"{stage_label(state.stage_index, stage.name)} {verdict} at step {model.num_timesteps}: "
                                 + self._rule_text().format(value=f"{measured:.3f}"))
