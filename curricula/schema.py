@@ -52,6 +52,11 @@ class AdvanceRule:
     plateau_steps: int | None = setting(None, optional(integer(low=1)))
     plateau_gain: float = setting(0.01, number(low=0))
 
+    @property
+    def tracked_gain(self) -> float | None:
+        """The gain the curriculum state tracks the stage's best by (None: no plateau rule)."""
+        return self.plateau_gain if self.plateau_steps is not None else None
+
 
 @dataclass(frozen=True)
 class PpoOverrides:

@@ -75,8 +75,7 @@ def plateau_run(means, rule, every=1_000):
     state = CurriculumState()
     decisions = []
     for k, mean in enumerate(means):
-        state.record("s", (k + 1) * every, [mean] * rule.window, rule.window,
-                     rule.plateau_gain if rule.plateau_steps is not None else None)
+        state.record("s", (k + 1) * every, [mean] * rule.window, rule.window, rule.tracked_gain)
         decisions.append(decide(rule, state))
     return state, decisions
 

@@ -295,9 +295,8 @@ class CurriculumTrainer:
         rule = self.stage.advance
         metric = rule.metric if rule else "score"
         window = rule.window if rule else 100
-        plateau_gain = rule.plateau_gain if rule and rule.plateau_steps is not None else None
         state.record(self.stage.name, int(model.num_timesteps), (episode_metric(metric, r) for _, _, r in results),
-                     window, plateau_gain)
+                     window, rule.tracked_gain if rule else None)
         self.folder.append_episodes(
             EpisodeRecord(step, wall_s, state.stage_index, self.stage.name, r.score, r.solved_steps, r.length,
                           r.dropped, r.effort, r.direction, r.start_phase) for step, wall_s, r in results)
