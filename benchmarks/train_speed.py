@@ -80,7 +80,8 @@ def run_reference(steps: int, n_envs: int, config: Path | None = None) -> dict[s
     model = RecurrentPPO(
         "MlpLstmPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps, batch_size=ppo.batch_size,
         n_epochs=ppo.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range,
-        ent_coef=ppo.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, seed=0, device="cpu",
+        ent_coef=ppo.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm,
+        target_kl=ppo.target_kl, seed=0, device="cpu",
         policy_kwargs={"lstm_hidden_size": policy.lstm_hidden_size, "enable_critic_lstm": True,
                        "shared_lstm": False, "net_arch": {"pi": list(policy.net_arch), "vf": list(policy.net_arch)},
                        "activation_fn": torch.nn.ReLU, "log_std_init": policy.log_std_init,

@@ -132,6 +132,9 @@ class PpoConfig:
     ent_coef: float = setting(3.6e-6, number(low=0))
     vf_coef: float = setting(0.84, number(low=0))
     max_grad_norm: float = setting(0.7, number(low=0, strict_low=True))
+    # SB3's early stop: an update ends its epochs at the first minibatch whose approximate KL
+    # from the rollout's policy exceeds 1.5 x this. None: all n_epochs always run.
+    target_kl: float | None = setting(None, optional(number(low=0, strict_low=True)))
     warmup: PpoWarmup = setting(PpoWarmup(), lambda reader, key, value: _ppo_warmup(reader, key, value))
 
 

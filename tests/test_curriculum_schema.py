@@ -153,7 +153,7 @@ def test_set_overrides_are_checked_against_the_schema(tmp_path):
         load_run_config(path, ("ppo.lerning_rate=1e-4",))
     assert str(error.value) == ("--set ppo.lerning_rate=1e-4: ppo.lerning_rate: unknown key (did you mean "
                                 "'learning_rate'?); allowed: learning_rate, n_steps, batch_size, n_epochs, gamma, "
-                                "gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm, warmup")
+                                "gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm, target_kl, warmup")
     with pytest.raises(ConfigError, match=r"^--set n_env=2: n_env: unknown key \(did you mean 'n_envs'\?\)"):
         load_run_config(path, ("n_env=2",))
     with pytest.raises(ConfigError, match=r"^--set ppo.gamma=2: ppo.gamma: must be <= 1, got 2"):

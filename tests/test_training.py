@@ -77,6 +77,24 @@ def test_ppo_warmup_trains_with_its_settings_then_hands_over_across_a_resume(tmp
     assert model._n_updates == 4
 
 
+def test_target_kl_ends_an_update_at_the_first_minibatch_past_it(tmp_path):
+    # 2 envs x 64 steps in minibatches of 64: two per epoch, 3 epochs. The first minibatch sees
+    # the rollout's own policy (KL ~0); after its step the second one's KL is far above 1.5e-9,
+    # so the update stops inside its first epoch. Without target_kl all three epochs run.
+    counts = {}
+    for target_kl in (None, 1.0e-9):
+        folder = tmp_path / str(target_kl)
+        folder.mkdir()
+        config = write_config(folder, total=100_000)
+        setting = "" if target_kl is None else f", target_kl: {target_kl}"
+        config.write_text(config.read_text().replace("n_epochs: 1}", f"n_epochs: 3{setting}}}"))
+        trainer = CurriculumTrainer.start(config, run_dir=folder / "run", progress=False)
+        assert trainer.run(max_wall_s=1e-9).num_timesteps == 128
+        assert trainer.model.target_kl == target_kl
+        counts[target_kl] = trainer.model._n_updates
+    assert counts == {None: 3, 1.0e-9: 1}
+
+
 def test_crash_mid_write_leaves_previous_checkpoint_loadable(tmp_path):
     config = write_config(tmp_path, total=512)
     run = tmp_path / "run"

@@ -101,7 +101,7 @@ def build_model(config: RunConfig, venv, settings: PpoSettings):
         learning_rate=settings.learning_rate, n_steps=settings.n_steps, batch_size=settings.batch_size,
         n_epochs=settings.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=settings.clip_range,
         ent_coef=settings.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm,
-        policy_kwargs=policy_kwargs, seed=config.seed, device=config.device, verbose=0)
+        target_kl=ppo.target_kl, policy_kwargs=policy_kwargs, seed=config.seed, device=config.device, verbose=0)
 
 
 def trained_policy_files(source: Path) -> tuple[Path, Path]:
