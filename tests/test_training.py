@@ -80,7 +80,8 @@ def test_ppo_warmup_trains_with_its_settings_then_hands_over_across_a_resume(tmp
 def test_target_kl_ends_an_update_at_the_first_minibatch_past_it(tmp_path):
     # 2 envs x 64 steps in minibatches of 64: two per epoch, 3 epochs. The first minibatch sees
     # the rollout's own policy (KL ~0); after its step the second one's KL is far above 1.5e-9,
-    # so the update stops inside its first epoch. Without target_kl all three epochs run.
+    # so the update stops inside its first epoch. Without target_kl all three epochs run. The
+    # epochs an update ran are logged as train/epochs_run.
     counts = {}
     for target_kl in (None, 1.0e-9):
         folder = tmp_path / str(target_kl)
@@ -91,8 +92,16 @@ def test_target_kl_ends_an_update_at_the_first_minibatch_past_it(tmp_path):
         trainer = CurriculumTrainer.start(config, run_dir=folder / "run", progress=False)
         assert trainer.run(max_wall_s=1e-9).num_timesteps == 128
         assert trainer.model.target_kl == target_kl
-        counts[target_kl] = trainer.model._n_updates
-    assert counts == {None: 3, 1.0e-9: 1}
+        counts[target_kl] = (trainer.model._n_updates, epochs_logged(RunFolder(folder / "run").tensorboard_dir))
+    assert counts == {None: (3, [3.0]), 1.0e-9: (1, [1.0])}
+
+
+def epochs_logged(tensorboard_dir: Path) -> list[float]:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    accumulator = EventAccumulator(str(tensorboard_dir), size_guidance={"scalars": 0})
+    accumulator.Reload()
+    return [event.value for event in accumulator.Scalars("train/epochs_run")]
 
 
 def test_crash_mid_write_leaves_previous_checkpoint_loadable(tmp_path):

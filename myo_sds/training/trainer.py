@@ -268,10 +268,13 @@ class CurriculumTrainer:
         complete = self.rollouts.collect(model, episode_callback)
         updated_at = time.perf_counter()
         if complete:
+            epochs_before = model._n_updates
             try:
                 model.train()
             except UpdateInterrupted:
                 pass  # stopped between minibatches: weights and optimizer are consistent
+            # SB3 counts an update's epochs, the one target_kl cut short included.
+            model.logger.record("train/epochs_run", model._n_updates - epochs_before)
         finished_at = time.perf_counter()
         self.state.wall_s += finished_at - self.iteration_started_at
         self.timings.append(RolloutTiming(model.num_timesteps - steps_before, finished_at - self.iteration_started_at,
