@@ -12,7 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from tiny_run import CONFIG, CURRICULUM, write_config
+from tiny_run import CONFIG, CURRICULUM, scalar_events, write_config
 
 from myo_sds.run_folder import EpisodeRecord, RunFolder
 from myo_sds.training import CurriculumTrainer
@@ -52,14 +52,6 @@ def test_each_episode_row_has_its_own_wall_time(tiny_run):
     assert walls == sorted(walls)
     # One wall time per rollout would give at most one value per rollout.
     assert len(set(walls)) > 2 * len(tiny_run.trainer.timings)
-
-
-def read_scalars(folder: Path, tag: str) -> list[int]:
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    accumulator = EventAccumulator(str(folder), size_guidance={"scalars": 0})
-    accumulator.Reload()
-    return [event.step for event in accumulator.Scalars(tag)]
 
 
 @pytest.mark.slow  # a real process and SIGKILL
@@ -103,7 +95,7 @@ def test_resume_after_sigkill_continues_from_the_last_checkpoint_with_consistent
     assert [line.split(", ")[1] for line in sessions] == ["from env step 0", f"from env step {saved.num_timesteps:,}"]
     assert state.stage_episodes == len(after)  # the curriculum counted exactly the logged episodes
     # TensorBoard shows one curve: the killed run's points after the checkpoint are purged.
-    logged = read_scalars(run / "tb", "curriculum/stage_steps")
+    logged = [event.step for event in scalar_events(run / "tb", "curriculum/stage_steps")]
     assert logged == sorted(set(logged)) and logged[-1] == total
 
 

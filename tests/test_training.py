@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import torch
 import yaml
-from tiny_run import CONFIG, CURRICULUM, write_config
+from tiny_run import CONFIG, CURRICULUM, scalar_events, write_config
 
 from myo_sds.curricula.schema import ConfigError
 from myo_sds.curricula.state import RunStatus
@@ -92,16 +92,9 @@ def test_target_kl_ends_an_update_at_the_first_minibatch_past_it(tmp_path):
         trainer = CurriculumTrainer.start(config, run_dir=folder / "run", progress=False)
         assert trainer.run(max_wall_s=1e-9).num_timesteps == 128
         assert trainer.model.target_kl == target_kl
-        counts[target_kl] = (trainer.model._n_updates, epochs_logged(RunFolder(folder / "run").tensorboard_dir))
+        epochs = scalar_events(RunFolder(folder / "run").tensorboard_dir, "train/epochs_run")
+        counts[target_kl] = (trainer.model._n_updates, [event.value for event in epochs])
     assert counts == {None: (3, [3.0]), 1.0e-9: (1, [1.0])}
-
-
-def epochs_logged(tensorboard_dir: Path) -> list[float]:
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    accumulator = EventAccumulator(str(tensorboard_dir), size_guidance={"scalars": 0})
-    accumulator.Reload()
-    return [event.value for event in accumulator.Scalars("train/epochs_run")]
 
 
 def test_crash_mid_write_leaves_previous_checkpoint_loadable(tmp_path):

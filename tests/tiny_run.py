@@ -38,3 +38,12 @@ def write_config(folder: Path, total: int, curriculum: str = CURRICULUM) -> Path
     path = folder / "run.yaml"
     path.write_text(CONFIG.format(total=total))
     return path
+
+
+def scalar_events(tensorboard_dir: Path, tag: str) -> list:
+    """A run's TensorBoard events of one scalar tag (each has .step and .value), in order."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    accumulator = EventAccumulator(str(tensorboard_dir), size_guidance={"scalars": 0})
+    accumulator.Reload()
+    return accumulator.Scalars(tag)
