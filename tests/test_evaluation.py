@@ -272,6 +272,19 @@ def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, cap
     assert "not a run folder" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("curriculum, task", [("baoding_p1_2022_rest", "p1_2022"), ("baoding_p1", "p1"),
+                                              ("quickstart", "p1")])
+def test_the_model_card_evaluates_on_the_task_the_curriculum_ends_on(tiny_run, tmp_path, curriculum, task):
+    """Its last stage's preset whatever its rewards (p1_2022's with the winner's; p1 as it is); a
+    curriculum that ends on no preset (quickstart: a 20 s orbit) falls back to p1."""
+    from myo_sds.evaluation.model_card import model_card
+
+    model = tmp_path / "model"
+    shutil.copytree(tiny_run.path, model, ignore=shutil.ignore_patterns("checkpoints", "tb"))
+    shutil.copy(Path(__file__).parents[1] / "curricula" / f"{curriculum}.yaml", RunFolder(model).curriculum_file)
+    assert f"python evaluate.py {model} --env {task} --official --episodes 200" in model_card(model, tiny_run.path)
+
+
 @pytest.mark.slow  # renders video frames in software
 def test_cli_plots_and_video_of_folders_without_an_episode_log(tmp_path, capsys):
     """A shipped model folder has no episode log: its shipped curve is copied; a published

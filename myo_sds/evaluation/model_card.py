@@ -4,8 +4,11 @@ each stage took on which machine, and how to evaluate or fine-tune it."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
+from myo_sds.curricula.schema import load_curriculum
+from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.evaluation.summary import RunSummary, stage_rows, summarize
 from myo_sds.run_folder import RunFolder
 
@@ -25,6 +28,16 @@ def _started_from(folder: RunFolder) -> list[str]:
     source = words[words.index("--init-from") + 1]
     return ["", f"**The run did not start from scratch**: it started from `{source}` (`--init-from`: its "
             "weights, optimizer state and normalization statistics), then trained through the stages below."]
+
+
+def _final_task(folder: RunFolder) -> str:
+    """The preset the run's last stage trains on (what to evaluate it on; its rewards aside, which
+    do not change the score); ``p1`` if none matches."""
+    curriculum = load_curriculum(folder.curriculum_file)
+    knobs = TASK_SPECS[curriculum.task].knobs
+    last = curriculum.stages[-1].distribution
+    return next((name for name in knobs.PRESETS
+                 if replace(knobs.parse(name), reward_weights=last.reward_weights) == last), "p1")
 
 
 def model_card(model_dir: Path, source_run: Path) -> str:
@@ -50,7 +63,7 @@ def model_card(model_dir: Path, source_run: Path) -> str:
              "## Use it",
              "",
              "```bash",
-             f"python evaluate.py {model_dir} --env p1 --official --episodes 200",
+             f"python evaluate.py {model_dir} --env {_final_task(folder)} --official --episodes 200",
              f"python train.py --config configs/<run>.yaml --init-from {model_dir}   # fine-tune on another curriculum",
              "```"]
     if folder.command_file.is_file():
