@@ -1,4 +1,4 @@
-"""The trained policy shipped in models/: it loads outside a run folder, behaves the same on our
+"""The trained policies shipped in models/: each loads outside a run folder, behaves the same on our
 env and on MyoSuite's, and replays the episodes its evaluation.json records wherever the
 numerics are the same (myo_sds/numerics.py)."""
 
@@ -12,40 +12,45 @@ import pytest
 from myo_sds import evaluation as ev
 from myo_sds import numerics
 
-MODEL = Path(__file__).resolve().parents[1] / "models" / "baoding_p1"
+MODELS = Path(__file__).resolve().parents[1] / "models"
+# Each shipped model folder with the task it is scored on.
+SHIPPED = [("baoding_p1", "p1"), ("baoding_p1_2022", "p1_2022")]
+shipped = pytest.mark.parametrize("model, env", SHIPPED, ids=[name for name, _ in SHIPPED])
 
 
-def _recorded() -> dict:
-    return json.loads((MODEL / "evaluation.json").read_text())
+def _recorded(model: str) -> dict:
+    return json.loads((MODELS / model / "evaluation.json").read_text())
 
 
-def _episodes(official: bool, episodes: int, seed: int = 0) -> list[dict]:
-    ref = ev.resolve_checkpoint(MODEL)
-    return ev.evaluate(ref, ev.choose_env(ref, "p1", official=official), episodes=episodes, seed=seed).summary()[
+def _episodes(model: str, env: str, official: bool, episodes: int, seed: int = 0) -> list[dict]:
+    ref = ev.resolve_checkpoint(MODELS / model)
+    return ev.evaluate(ref, ev.choose_env(ref, env, official=official), episodes=episodes, seed=seed).summary()[
         "per_episode"]
 
 
-def test_shipped_p1_policy_plays_the_same_episode_on_our_env_and_myosuites():
+@shipped
+def test_shipped_policy_plays_the_same_episode_on_our_env_and_myosuites(model, env):
     pytest.importorskip("myosuite")
-    ours, theirs = _episodes(False, 1)[0], _episodes(True, 1)[0]
+    ours, theirs = _episodes(model, env, False, 1)[0], _episodes(model, env, True, 1)[0]
     assert (ours["solved_steps"], ours["length"], ours["dropped"]) == (
         theirs["solved_steps"], theirs["length"], theirs["dropped"])
     assert ours["effort"] == pytest.approx(theirs["effort"], rel=1e-6)
 
 
+@shipped
 @pytest.mark.parametrize("official", [False, True], ids=["ours", "official"])
-def test_shipped_p1_policy_replays_its_recorded_evaluation(official):
+def test_shipped_policy_replays_its_recorded_evaluation(model, env, official):
     if official:
         pytest.importorskip("myosuite")
-    recorded = _recorded()
+    recorded = _recorded(model)
     here = numerics.fingerprint()
     if recorded["numerics"]["fingerprint"] != here:
         pytest.skip(f"evaluation.json was taken with numerics {recorded['numerics']['fingerprint']} "
                     f"({recorded['numerics']['cpu']}), this machine's are {here} ({numerics.cpu_name()})")
-    report = next(r for r in recorded["reports"] if r["env"] == "p1" and r["official_env"] == official)
-    replayed = _episodes(official, 2, seed=report["seed"])
+    report = next(r for r in recorded["reports"] if r["env"] == env and r["official_env"] == official)
+    replayed = _episodes(model, env, official, 2, seed=report["seed"])
     for now, then in zip(replayed, report["per_episode"][:2]):
         assert (now["solved_steps"], now["length"], now["dropped"]) == (then["solved_steps"], then["length"], then["dropped"])
         assert now["effort"] == pytest.approx(then["effort"], rel=1e-6)
-    # P1 starts every episode in the same state: the deterministic policy's score is exact.
+    # P1 and p1_2022 start every episode in the same state: the deterministic policy's score is exact.
     assert sum(e["score"] for e in replayed) / len(replayed) == pytest.approx(report["score"])
