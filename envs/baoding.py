@@ -133,6 +133,9 @@ class BaodingEnv(MuscleHandEnv):
     def _episode_start_phase(self) -> float:
         return float(self.task.start_angle % (2 * np.pi))
 
+    def _episode_horizon(self) -> int:
+        return self.knobs.episode_steps or self.horizon
+
     def _goal_phase(self) -> float:
         return self._target_angle  # of the targets this step was solved against
 

@@ -17,6 +17,7 @@ from myo_sds.envs.knobs import (
     TaskKnobs,
     check_complete,
     choice,
+    count,
     knob,
     optional,
     parse_choice,
@@ -167,6 +168,9 @@ class BaodingKnobs(TaskKnobs):
     drop_height: float = knob(1.25, parse=to_float, help="m, a ball below this height is dropped and ends the episode")
     solved_radius: float = knob(0.015, parse=scalar(positive=True),
                                 help="m, both balls within this distance of their targets = solved")
+    episode_steps: int | None = knob(None, parse=optional(count()),
+                                     help="control steps per episode: null (the official 200) or a count, e.g. 400 for "
+                                          "two 5 s orbits; the score stays solved steps over this count")
     reward_weights: Mapping[str, float] = knob(
         default_factory=lambda: {"pos_dist_1": 5.0, "pos_dist_2": 5.0}, parse=weights(REWARD_TERMS),
         help=f"mapping term -> weight over {', '.join(REWARD_TERMS)}")

@@ -124,6 +124,10 @@ class MuscleHandEnv(gym.Env):
         """Where on its path the episode's goal starts, for reports by start phase."""
         return None
 
+    def _episode_horizon(self) -> int:
+        """Control steps before truncation this episode (a knob may lengthen the constructor's)."""
+        return self.horizon
+
     def _goal_phase(self) -> float | None:
         """Where on its path the goal is at this step (rad), for reports by goal phase."""
         return None
@@ -207,7 +211,8 @@ class MuscleHandEnv(gym.Env):
         for key, weight in self.knobs.reward_weights.items():  # in order, as the official sum
             reward += weight * terms[key]
         terminated = bool(terms["done"]) or unstable
-        truncated = not terminated and self._counter >= self.horizon
+        horizon = self._episode_horizon()
+        truncated = not terminated and self._counter >= horizon
         episode = self._episode
         episode["length"] += 1
         episode["solved_steps"] += int(terms["solved"])
@@ -220,7 +225,7 @@ class MuscleHandEnv(gym.Env):
         info: dict[str, Any] = {**terms, "dropped": bool(terms["done"]), "unstable": unstable, "task": self.task}
         if terminated or truncated:
             info["episode_result"] = EpisodeResult(
-                solved_steps=episode["solved_steps"], length=episode["length"], horizon=self.horizon,
+                solved_steps=episode["solved_steps"], length=episode["length"], horizon=horizon,
                 dropped=bool(terms["done"]), effort=episode["effort_sum"] / episode["length"],
                 direction=self._episode_label(), task=self.TASK_NAME, start_phase=self._episode_start_phase(),
                 **self._phase_counts(episode))

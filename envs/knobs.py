@@ -192,6 +192,16 @@ def scalar(*, positive: bool = False, minimum: float | None = None) -> Parser:
     return lambda name, value: parse_range(name, value, positive=positive, minimum=minimum).low
 
 
+def count() -> Parser:
+    """A whole number above 0 (``400``; ``4e2`` and ``400.0`` too, as YAML may write them)."""
+    def parse(name: str, value: Any) -> int:
+        number = to_float(name, value) if not isinstance(value, bool) else math.nan
+        if not (number >= 1 and number == int(number)):
+            raise ValueError(f"{name}: expected a whole number >= 1, got {value!r}")
+        return int(number)
+    return parse
+
+
 def optional(parse: Parser) -> Parser:
     """``null`` (None: the model's own value) or what ``parse`` reads."""
     return lambda name, value: None if value is None else parse(name, value)

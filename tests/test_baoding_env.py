@@ -212,6 +212,26 @@ def test_truncates_at_horizon():
     assert info["episode_result"].length == 30
 
 
+def test_episode_steps_knob_lengthens_the_episode_and_the_score_counts_over_it():
+    env = BaodingEnv(drop_height=-10.0, horizon=30, episode_steps=45, rsi_probability=1.0)
+    env.reset(seed=0)
+    solved = 0
+    for step in range(45):
+        _, _, terminated, truncated, info = env.step(np.zeros(39, np.float32))
+        solved += int(info["solved"])
+        assert not terminated
+        assert truncated == (step == 44)  # not at the constructor's 30
+    result = info["episode_result"]
+    assert (result.length, result.horizon, result.solved_steps) == (45, 45, solved)
+    assert solved > 0 and result.score == pytest.approx(solved / 45)
+    env.configure(episode_steps=None)  # back to the constructor's horizon
+    env.reset(seed=0)
+    for step in range(30):
+        _, _, _, truncated, info = env.step(np.zeros(39, np.float32))
+    assert truncated and info["episode_result"].horizon == 30
+    assert BaodingKnobs.parse("p1", episode_steps="4e2").episode_steps == 400
+
+
 def test_presets_equal_official_ranges():
     p1 = BaodingKnobs.parse("p1")
     assert p1.direction == "ccw" and (p1.period.low, p1.period.high) == (5.0, 5.0)
@@ -256,6 +276,9 @@ def test_configure_replaces_distribution_from_preset():
     ({"finger_noise": -0.1}, "must be >= 0"),
     ({"reward_weights": {"pos_dist": 1}}, "unknown reward term"),
     ({"ball_mass": float("nan")}, "finite"),
+    ({"episode_steps": 0}, "expected a whole number >= 1"),
+    ({"episode_steps": 1.5}, "expected a whole number >= 1"),
+    ({"episode_steps": True}, "expected a whole number >= 1"),
 ])
 def test_bad_knobs_name_the_problem(knobs, message):
     with pytest.raises(ValueError) as error:
