@@ -189,4 +189,5 @@ SPEC = TaskSpec(
     official_setup={"p1_2022": _official_2022_start},
     preset_notes={"p1": "targets start at pi/4, 90 deg behind the balls (MyoSuite 3.0.0)",
                   "p1_2022": "targets start at 3pi/4, on the resting balls (the 2022 phase-1 leaderboard)",
-                  "p2": "random start angle (P2)"})
+                  "p2": "random start angle (P2)"},
+    hand_joints=N_HAND_JOINTS)

@@ -91,4 +91,5 @@ class DieKnobs(TaskKnobs):
 SPEC = TaskSpec(
     name="die", knobs=DieKnobs, reward_terms=REWARD_TERMS, env_path="myo_sds.envs.die:DieEnv",
     episode_score=solved_on_more_than(SUCCESS_STEPS), gym_name="Die",
-    official_ids={"p1": "myoChallengeDieReorientP1-v0", "p2": "myoChallengeDieReorientP2-v0"})
+    official_ids={"p1": "myoChallengeDieReorientP1-v0", "p2": "myoChallengeDieReorientP2-v0"},
+    hand_joints=N_HAND_JOINTS)

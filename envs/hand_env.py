@@ -179,6 +179,19 @@ class MuscleHandEnv(gym.Env):
                          "phase_steps": [0] * PHASE_SECTORS, "phase_solved": [0] * PHASE_SECTORS}
         return self._observe().astype(np.float32), {"task": task}
 
+    def move_hand_joints(self, offsets: np.ndarray) -> np.ndarray:
+        """Add ``offsets`` to the first ``len(offsets)`` joint angles right after a reset (start
+        noise drawn outside the env, e.g. by an evaluation) and return the new observation.
+
+        Not clipped to the joint ranges and followed by ``mj_forward``, exactly as the same move
+        on the official env, so both replay the same perturbed episode.
+        """
+        if self._counter != 0:
+            raise RuntimeError("move_hand_joints: only at the start of an episode, before the first step")
+        self.data.qpos[:len(offsets)] += offsets
+        mujoco.mj_forward(self.model, self.data)
+        return self._observe().astype(np.float32)
+
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply one control step (``FRAME_SKIP`` physics substeps).
 

@@ -44,6 +44,9 @@ class TaskSpec:
         official_setup: preset -> a function that sets up the official env (its unwrapped env)
             before its first reset, for a preset that differs from the id's defaults.
         preset_notes: preset -> what an evaluation report says of it (e.g. where episodes start).
+        hand_joints: how many of the first ``qpos`` entries are the hand's joint angles (on our env
+            and the official one alike), which ``evaluate.py --start-noise`` moves at reset; 0 for a
+            task without them.
     """
 
     name: str
@@ -55,6 +58,7 @@ class TaskSpec:
     official_ids: Mapping[str, str] = field(default_factory=dict)
     official_setup: Mapping[str, Callable[[Any], None]] = field(default_factory=dict)
     preset_notes: Mapping[str, str] = field(default_factory=dict)
+    hand_joints: int = 0
 
     def env_class(self) -> type:
         module, name = self.env_path.split(":")

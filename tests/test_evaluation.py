@@ -86,6 +86,59 @@ def test_our_env_and_official_env_give_the_same_score(run_dir, preset):
     assert len({e.direction for e in ours.episodes}) >= (2 if preset == "p2" else 1)
 
 
+def test_start_noise_moves_the_hand_alike_on_both_envs_and_makes_episodes_differ(run_dir):
+    pytest.importorskip("myosuite")
+    from myo_sds.envs.baoding import N_HAND_JOINTS, BaodingEnv
+    from myo_sds.evaluation.episodes import make_env, move_hand_joints, start_offsets
+
+    ref = ev.resolve_checkpoint(run_dir)
+    noisy = ev.choose_env(ref, "p1_2022", start_noise=0.02)
+    # The offsets: one U(-0.02, 0.02) per hand joint, fixed by the episode's seed.
+    offsets = start_offsets(7, 0.02, N_HAND_JOINTS)
+    assert offsets.shape == (23,) and np.abs(offsets).max() <= 0.02 and np.abs(offsets).min() > 0
+    assert np.array_equal(offsets, start_offsets(7, 0.02, N_HAND_JOINTS))
+    assert not np.array_equal(offsets, start_offsets(8, 0.02, N_HAND_JOINTS))
+    # After the move, each env's hand angles are its reset angles plus the offsets (unclipped),
+    # the observation shows them, and the two envs' observations agree.
+    ours, official = BaodingEnv("p1_2022"), make_env(ev.choose_env(ref, "p1_2022", official=True))
+    ours.reset(seed=7)
+    before = ours.data.qpos[:23].copy()
+    obs = move_hand_joints(ours, noisy, offsets)
+    assert np.array_equal(ours.data.qpos[:23], before + offsets)
+    assert np.allclose(obs[:23], before + offsets, atol=1e-7)
+    official.reset(seed=7)
+    official_obs = move_hand_joints(official, ev.choose_env(ref, "p1_2022", official=True, start_noise=0.02), offsets)
+    assert np.array_equal(official.unwrapped.data.qpos[:23], before + offsets)
+    assert np.allclose(obs, official_obs, atol=1e-6)
+    # Whole episodes: ours = official episode by episode, and the episodes differ from each other
+    # (without noise the fixed P1 start replays one episode).
+    plain = ev.evaluate(ref, ev.choose_env(ref, "p1_2022"), episodes=3, seed=0)
+    assert len({(e.solved_steps, e.length, e.effort) for e in plain.episodes}) == 1
+    mine = ev.evaluate(ref, noisy, episodes=3, seed=0)
+    theirs = ev.evaluate(ref, ev.choose_env(ref, "p1_2022", official=True, start_noise=0.02), episodes=3, seed=0)
+    for a, b in zip(mine.episodes, theirs.episodes):
+        assert (a.solved_steps, a.length, a.dropped) == (b.solved_steps, b.length, b.dropped)
+        assert a.effort == pytest.approx(b.effort, rel=1e-9)
+    assert len({e.effort for e in mine.episodes}) == 3
+    summary = mine.summary()
+    assert summary["start_noise"] == 0.02 and noisy.label == "ours:p1_2022 noise 0.02"
+    scores = [e.score for e in mine.episodes]
+    assert summary["score_spread"]["std"] == pytest.approx(np.std(scores))
+    assert (summary["score_spread"]["min"], summary["score_spread"]["max"]) == (min(scores), max(scores))
+    with pytest.raises(ev.EvaluationError, match="radians >= 0"):
+        ev.choose_env(ref, "p1", start_noise=-0.1)
+
+
+def test_the_table_fits_120_columns(run_dir):
+    ref = ev.resolve_checkpoint(run_dir)
+    reports = [ev.evaluate(ref, ev.choose_env(ref, env, start_noise=noise), episodes=1)
+               for env in ("p1", "p1_2022") for noise in (0.0, 0.02)]
+    table = ev.format_table(reports)
+    assert max(len(line) for line in table.splitlines()) <= 120
+    for report in reports:
+        assert report.env.label in table
+
+
 @pytest.mark.slow  # renders video frames in software
 def test_cli_writes_json_plots_and_video(run_dir, tmp_path):
     out = tmp_path / "out"
@@ -98,7 +151,8 @@ def test_cli_writes_json_plots_and_video(run_dir, tmp_path):
     assert "score" in result.stdout and "drop rate" in result.stdout
     data = json.loads((out / "e.json").read_text())
     (report,) = data["reports"]
-    for key in ("checkpoint", "env", "official_env", "seed", "episodes", "score", "score_ci95", "effort",
+    for key in ("checkpoint", "env", "official_env", "seed", "start_noise", "episodes", "score", "score_ci95",
+                "score_spread", "effort",
                 "drop_rate", "mean_length", "per_direction", "per_start_phase", "per_episode"):
         assert key in report, key
     assert report["env"] == "p1" and report["episodes"] == 3

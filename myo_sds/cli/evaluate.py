@@ -3,6 +3,11 @@
     python evaluate.py runs/quickstart [--env p1|p2|stage:NAME] [--official] [--episodes 50]
                        [--json out.json] [--plots out/] [--video out.mp4]
     python evaluate.py runA runB/checkpoints/rl_model_200000_steps.zip   # side by side
+    python evaluate.py models/baoding_p1_2022 --env p1_2022 --official --start-noise 0,0.02 --episodes 100
+
+P1's start is fixed and the policy deterministic, so without start noise every P1 episode is the
+same one: --start-noise RAD moves each hand joint by U(-RAD, RAD) at reset (the same draw on our
+env and the official one) and scores the policy rather than one replay of it.
 """
 
 from __future__ import annotations
@@ -16,13 +21,27 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede `import mujoco`
 
 
+def _noise_list(text: str) -> list[float]:
+    try:
+        values = [float(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected radians, e.g. 0.02 or 0,0.02") from None
+    if not values or any(not (v >= 0 and v < float("inf")) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected radians >= 0, e.g. 0.02 or 0,0.02")
+    return values
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("targets", nargs="+", type=Path, metavar="RUN_DIR_OR_CHECKPOINT")
     parser.add_argument("--env", default="p1",
-                        help="p1 (default), p2, or stage:NAME of the run's curriculum; several comma-separated")
-    parser.add_argument("--official", action="store_true", help="also evaluate p1/p2 on myosuite's official env")
-    parser.add_argument("--episodes", type=int, default=50)
+                        help="p1 (default; MyoSuite 3.0.0's P1), p1_2022 (the 2022 leaderboard's P1 start), p2, "
+                             "or stage:NAME of the run's curriculum; several comma-separated")
+    parser.add_argument("--official", action="store_true", help="also evaluate the presets on myosuite's official env")
+    parser.add_argument("--episodes", type=int, default=50, help="episodes per policy and env (default 50)")
+    parser.add_argument("--start-noise", type=_noise_list, default=[0.0], metavar="RAD[,RAD...]",
+                        help="move each hand joint by U(-RAD, RAD) at reset (default 0); several comma-separated, "
+                             "e.g. 0,0.02, evaluate each")
     parser.add_argument("--seed", type=int, default=0, help="episode i is reset with seed + i")
     parser.add_argument("--workers", type=int, default=1, help="parallel worker processes for the episodes")
     parser.add_argument("--load-checkpoint", type=int, metavar="STEPS", help="a run's checkpoint at STEPS")
@@ -72,9 +91,10 @@ def main(argv: list[str] | None = None) -> int:
         for ref in refs:
             ref_choices = []
             for name in names:
-                ref_choices.append(ev.choose_env(ref, name))
-                if args.official and not name.startswith("stage:"):
-                    ref_choices.append(ev.choose_env(ref, name, official=True))
+                for noise in args.start_noise:
+                    ref_choices.append(ev.choose_env(ref, name, start_noise=noise))
+                    if args.official and not name.startswith("stage:"):
+                        ref_choices.append(ev.choose_env(ref, name, official=True, start_noise=noise))
             choices.append(ref_choices)
         reports = []
         for ref, ref_choices in zip(refs, choices):

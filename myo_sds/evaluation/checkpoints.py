@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -42,10 +43,12 @@ class EnvChoice:
     name: str  # "p1", "p2" or "stage:NAME"
     distribution: TaskKnobs  # our env's knobs (a preset's, or the stage's)
     official: bool = False
+    start_noise: float = 0.0  # rad: each hand joint moved by U(-start_noise, start_noise) at reset
 
     @property
     def label(self) -> str:
-        return f"{'official' if self.official else 'ours'}:{self.name}"
+        noise = f" noise {self.start_noise:g}" if self.start_noise else ""
+        return f"{'official' if self.official else 'ours'}:{self.name}{noise}"
 
 
 
@@ -144,13 +147,17 @@ def run_task(ref: CheckpointRef) -> str:
                           f"task than these ({', '.join(f'{n}: ({s.env_class().OBS_SIZE},)' for n, s in TASK_SPECS.items())})")
 
 
-def choose_env(ref: CheckpointRef, name: str, official: bool = False) -> EnvChoice:
+def choose_env(ref: CheckpointRef, name: str, official: bool = False, start_noise: float = 0.0) -> EnvChoice:
     """Parse a preset (``p1``, ``p1_2022``, ``p2``) or ``stage:NAME`` (a stage of the checkpoint's
-    own curriculum)."""
+    own curriculum); ``start_noise`` (rad) moves each hand joint at reset."""
     task = run_task(ref)
+    if not (start_noise >= 0 and math.isfinite(start_noise)):
+        raise EvaluationError(f"--start-noise {start_noise}: expected radians >= 0, e.g. 0.02")
+    if start_noise and not TASK_SPECS[task].hand_joints:
+        raise EvaluationError(f"--start-noise: the {task} task declares no hand joints to move")
     presets = TASK_SPECS[task].knobs.PRESETS
     if name in presets:
-        choice = EnvChoice(task, name, TASK_SPECS[task].knobs.parse(name), official)
+        choice = EnvChoice(task, name, TASK_SPECS[task].knobs.parse(name), official, start_noise)
     elif name.startswith("stage:"):
         if official:
             raise EvaluationError(f"--env {name}: the official env has only the presets' tasks "
@@ -162,7 +169,7 @@ def choose_env(ref: CheckpointRef, name: str, official: bool = False) -> EnvChoi
             stage = curriculum.stages[curriculum.stage_index(name[len("stage:"):])]
         except KeyError as error:
             raise EvaluationError(f"--env {name}: {error.args[0]}") from None
-        choice = EnvChoice(task, name, stage.distribution, official)
+        choice = EnvChoice(task, name, stage.distribution, official, start_noise)
     else:
         raise EvaluationError(f"--env {name!r}: expected one of {', '.join(presets)} or stage:NAME")
     if official and name not in TASK_SPECS[task].official_ids:

@@ -3,6 +3,11 @@
 Episode ``i`` of an evaluation is reset with seed ``seed + i``. Our presets draw task
 instances exactly as the official env does, so the same seeds give the same episodes on
 both; with a deterministic policy the two scores then agree (tests/test_evaluation.py).
+
+A fixed start (P1) with a deterministic policy is one episode however often it is played:
+start noise (``EnvChoice.start_noise``) moves each hand joint by U(-noise, noise) after the
+reset, drawn from the episode's seed apart from the env's own stream, so our env and the
+official one get the same move and still replay the same episode.
 """
 
 from __future__ import annotations
@@ -60,9 +65,11 @@ class EvaluationReport:
             "start": TASK_SPECS[self.env.task].preset_notes.get(
                 self.env.name, "the stage's own start" if self.env.name.startswith("stage:") else ""),
             "seed": self.seed,
+            "start_noise": self.env.start_noise,
             "episodes": len(self.episodes),
             "score": official_score(self.episodes),
             "score_ci95": [low, high],
+            "score_spread": score_spread(scores),
             "effort": mean_effort(self.episodes),
             "drop_rate": drop_rate(self.episodes),
             "mean_length": float(np.mean([e.length for e in self.episodes])) if self.episodes else math.nan,
@@ -71,6 +78,16 @@ class EvaluationReport:
             "per_target_phase": per_target_phase(self.episodes),
             "per_episode": [e.to_dict() for e in self.episodes],
         }
+
+
+def score_spread(scores: Sequence[float]) -> dict[str, float]:
+    """How the episodes' scores spread: standard deviation, minimum, quartiles, maximum."""
+    if not scores:
+        return {}
+    values = np.asarray(scores, dtype=float)
+    q1, median, q3 = np.quantile(values, [0.25, 0.5, 0.75])
+    return {"std": float(values.std()), "min": float(values.min()), "q1": float(q1), "median": float(median),
+            "q3": float(q3), "max": float(values.max())}
 
 
 def per_start_phase(episodes: Sequence[EpisodeResult | EpisodeRecord]) -> dict[str, dict[str, Any]]:
@@ -127,10 +144,37 @@ def _official_direction(env) -> str | None:
     return _OFFICIAL_DIRECTIONS[which.value] if which is not None else None
 
 
+_START_NOISE_STREAM = 0x57A27  # mixed with the episode's seed: a stream apart from the env's own
+
+
+def start_offsets(seed: int, noise: float, joints: int) -> np.ndarray:
+    """The hand-joint offsets (rad) of the episode reset with ``seed``: U(-noise, noise) each."""
+    return np.random.default_rng([_START_NOISE_STREAM, seed]).uniform(-noise, noise, joints)
+
+
+def move_hand_joints(env, choice: EnvChoice, offsets: np.ndarray) -> np.ndarray:
+    """Add ``offsets`` to the hand's joint angles of a just-reset env, ours or the official one
+    (the same arithmetic on both: no clipping, then ``mj_forward``); the new observation."""
+    if not choice.official:
+        return env.unwrapped.move_hand_joints(offsets)
+    import mujoco
+
+    official = env.unwrapped
+    official.data.qpos[:len(offsets)] += offsets
+    mujoco.mj_forward(official.model, official.data)
+    if hasattr(official, "get_obs"):  # Baoding's; the die env has only the observation dict
+        return np.asarray(official.get_obs(), dtype=np.float32)
+    obs_dict = official.get_obs_dict(official.model, official.data)
+    return np.asarray(official._obs_dict_to_vec(obs_dict), dtype=np.float32)
+
+
 def run_episode(policy: LoadedPolicy, env, choice: EnvChoice, seed: int, frames: list | None = None) -> EpisodeResult:
     """One deterministic episode; the LSTM state starts fresh. With ``frames``, each step's
     rendered image and whether the step was solved are appended to it."""
     obs, _ = env.reset(seed=seed)
+    if choice.start_noise:
+        offsets = start_offsets(seed, choice.start_noise, TASK_SPECS[choice.task].hand_joints)
+        obs = move_hand_joints(env, choice, offsets)
     state, start = None, True
     solved = length = 0
     effort = 0.0

@@ -1,19 +1,23 @@
-"""The side-by-side table ``evaluate.py`` prints."""
+"""The side-by-side table ``evaluate.py`` prints: one block per checkpoint, one column per env,
+columns wrapped so no line is wider than the terminal's usual 120 characters."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from myo_sds.evaluation.episodes import EvaluationReport
 
+TABLE_WIDTH = 120
 
-def format_table(reports: Sequence[EvaluationReport]) -> str:
-    """Side-by-side table, one column per (checkpoint, env)."""
-    summaries = [r.summary() for r in reports]
-    columns = [f"{r.checkpoint.label} | {r.env.label}" for r in reports]
+
+def _rows(summaries: list[dict[str, Any]]) -> list[tuple[str, list[str]]]:
     directions = sorted({d for s in summaries for d in s["per_direction"]})
     rows = [("episodes", [str(s["episodes"]) for s in summaries]),
             ("score", [f"{s['score']:.3f} [{s['score_ci95'][0]:.3f}, {s['score_ci95'][1]:.3f}]" for s in summaries]),
+            ("score std [min, max]", [f"{s['score_spread']['std']:.3f} [{s['score_spread']['min']:.3f}, "
+                                      f"{s['score_spread']['max']:.3f}]" if s["score_spread"] else "-"
+                                      for s in summaries]),
             ("effort", [f"{s['effort']:.4f}" for s in summaries]),
             ("drop rate", [f"{s['drop_rate']:.3f}" for s in summaries]),
             ("mean length", [f"{s['mean_length']:.1f}" for s in summaries])]
@@ -32,10 +36,42 @@ def format_table(reports: Sequence[EvaluationReport]) -> str:
     for sector in sectors:
         rows.append((f"solved, targets at {sector} deg", breakdown(
             "per_target_phase", sector, lambda d: f"{d['solved_fraction']:.3f} ({d['steps']} steps)")))
-    width = max(len(name) for name, _ in rows)
+    return rows
+
+
+def _block(columns: list[str], rows: list[tuple[str, list[str]]], width: int) -> list[str]:
+    """The rows under ``columns``, the columns split into as many blocks as ``width`` needs."""
+    name_width = max(len(name) for name, _ in rows)
     col_width = [max(len(c), *(len(cells[i]) for _, cells in rows)) for i, c in enumerate(columns)]
-    lines = [" " * width + "  " + "  ".join(c.ljust(w) for c, w in zip(columns, col_width))]
-    lines += [name.ljust(width) + "  " + "  ".join(v.ljust(w) for v, w in zip(cells, col_width)) for name, cells in rows]
-    starts = {s["env"]: s["start"] for s in summaries if s.get("start")}
+    groups: list[list[int]] = [[]]
+    used = name_width
+    for i, w in enumerate(col_width):
+        if groups[-1] and used + 2 + w > width:
+            groups.append([])
+            used = name_width
+        groups[-1].append(i)
+        used += 2 + w
+    lines: list[str] = []
+    for group in groups:
+        if lines:
+            lines.append("")
+        lines.append((" " * name_width + "  " + "  ".join(columns[i].ljust(col_width[i]) for i in group)).rstrip())
+        lines += [(name.ljust(name_width) + "  " + "  ".join(cells[i].ljust(col_width[i]) for i in group)).rstrip()
+                  for name, cells in rows]
+    return lines
+
+
+def format_table(reports: Sequence[EvaluationReport], width: int = TABLE_WIDTH) -> str:
+    """One block per checkpoint (its label as a heading), one column per env it was evaluated on."""
+    lines: list[str] = []
+    labels = list(dict.fromkeys(r.checkpoint.label for r in reports))
+    for label in labels:
+        mine = [r for r in reports if r.checkpoint.label == label]
+        summaries = [r.summary() for r in mine]
+        if lines:
+            lines.append("")
+        lines.append(f"== {label}")
+        lines += _block([r.env.label for r in mine], _rows(summaries), width)
+    starts = {s["env"]: s["start"] for r in reports for s in [r.summary()] if s.get("start")}
     lines += [""] + [f"{env}: {note}" for env, note in starts.items()]
     return "\n".join(lines)
