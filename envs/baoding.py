@@ -13,13 +13,16 @@ so the same seed gives the same task instance there and here):
   4. x radius, y radius (always, even when fixed), period (unless static);
   5. ball mass x2, friction x2, size x2 (each only when its knob is set);
   6. palm noise (3 wrist joints), finger noise (20 joints), each only when > 0;
-  7. whether to start on the targets, only when 0 < ``rsi_probability`` < 1.
+  7. whether to start on the targets, only when 0 < ``rsi_probability`` < 1;
+  8. with ``recorded_start`` set: whether to start from a recorded state, which one, and the
+     start offset of the targets placed on its balls (the last two only when it does).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import mujoco
@@ -123,6 +126,26 @@ class BaodingEnv(MuscleHandEnv):
         self._place_targets(0)
         if state is None:
             self._randomize_start(rng)
+
+    def _task_for_recorded_state(self, task: BaodingTask, rng: np.random.Generator) -> BaodingTask:
+        """The targets placed on the restored balls (the orbit angle of the balls' pair), plus
+        a ``start_offset`` draw; direction, period, radii and ball physics stay the task's."""
+        offset = self.knobs.start_offset.sample(rng) if self.knobs.start_offset is not None else 0.0
+        task = replace(task, start_angle=float((self.balls_phase() + offset) % (2 * np.pi)))
+        self.task = task
+        self._place_targets(0)
+        return task
+
+    def balls_phase(self) -> float:
+        """The orbit angle at which the targets would sit on the balls as they are now: the angle
+        of ball 1 minus ball 2 in the frame the targets move in, each axis scaled by its radius
+        (for balls on their targets at angle a and a - pi it is a). Updates kinematics."""
+        model, data = self.model, self.data
+        mujoco.mj_kinematics(model, data)
+        frame = model.site_bodyid[self._target_sites[0]]
+        between = data.site_xpos[self._ball_sites[0]] - data.site_xpos[self._ball_sites[1]]
+        local = data.xmat[frame].reshape(3, 3).T @ between
+        return float(math.atan2(local[1] / self.task.y_radius, local[0] / self.task.x_radius) % (2 * np.pi))
 
     def _before_physics(self) -> None:
         self._place_targets(self._counter)

@@ -39,6 +39,35 @@ def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Rend
             "(the default here), or `apt-get install libosmesa6` and set MUJOCO_GL=osmesa.") from None
 
 
+class StateBank:
+    """A bounded reservoir of simulator states (``qpos``, ``qvel``, ``act``): every state offered
+    is equally likely to be in it, whatever the number offered (Vitter's algorithm R)."""
+
+    def __init__(self, capacity: int, model: mujoco.MjModel) -> None:
+        self.capacity = capacity
+        self.qpos = np.zeros((capacity, model.nq))
+        self.qvel = np.zeros((capacity, model.nv))
+        self.act = np.zeros((capacity, model.na))
+        self.size = 0
+        self.offered = 0
+
+    def offer(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
+        """Keep ``data``'s state: in a free slot, else in place of a random kept one with
+        probability capacity / offered (one draw from ``rng`` once the bank is full)."""
+        self.offered += 1
+        if self.size < self.capacity:
+            slot = self.size
+            self.size += 1
+        else:
+            slot = int(rng.integers(self.offered))
+            if slot >= self.capacity:
+                return
+        self.qpos[slot], self.qvel[slot], self.act[slot] = data.qpos, data.qvel, data.act
+
+    def restore(self, slot: int, data: mujoco.MjData) -> None:
+        data.qpos[:], data.qvel[:], data.act[:] = self.qpos[slot], self.qvel[slot], self.act[slot]
+
+
 class MuscleHandEnv(gym.Env):
     """Base of the MyoHand tasks. Subclasses set the class constants and implement
     :meth:`sample_task`, :meth:`_start_episode`,
@@ -82,6 +111,8 @@ class MuscleHandEnv(gym.Env):
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (self.OBS_SIZE,), np.float32)
         self.task: Any = None
         self._counter = 0
+        self.state_bank: StateBank | None = None  # states of earlier episodes (``recorded_start`` knob)
+        self.recorded_start = False  # whether this episode began from a banked state
         self._renderer: mujoco.Renderer | None = None
         self._camera = mujoco.MjvCamera()
 
@@ -132,6 +163,11 @@ class MuscleHandEnv(gym.Env):
         """Where on its path the goal is at this step (rad), for reports by goal phase."""
         return None
 
+    def _task_for_recorded_state(self, task: Any, rng: np.random.Generator) -> Any:
+        """The episode's task once a recorded state has replaced the start: its goal placed
+        relative to the restored objects. Tasks that declare a ``recorded_start`` knob implement it."""
+        raise NotImplementedError(f"{type(self).__name__} does not support recorded starts")
+
     # -- distribution -------------------------------------------------------------------
 
     def configure(self, preset: str | None = None, *, distribution: TaskKnobs | None = None, **knobs: Any) -> None:
@@ -173,6 +209,8 @@ class MuscleHandEnv(gym.Env):
         self._start_episode(task, self.np_random, state)
         if state is not None:
             self._set_state(state)
+        self.recorded_start = state is None and self._start_from_bank(self.np_random)
+        task = self.task
         # The observation needs positions only; mj_step computes everything else itself.
         mujoco.mj_kinematics(self.model, self.data)
         self._episode = {"solved_steps": 0, "effort_sum": 0.0, "length": 0,
@@ -191,6 +229,23 @@ class MuscleHandEnv(gym.Env):
         self.data.qpos[:len(offsets)] += offsets
         mujoco.mj_forward(self.model, self.data)
         return self._observe().astype(np.float32)
+
+    def _recorded_start_knob(self):
+        return getattr(self.knobs, "recorded_start", None)
+
+    def _start_from_bank(self, rng: np.random.Generator) -> bool:
+        """With the ``recorded_start`` knob's probability (one draw at every reset while the knob
+        is set), replace the start by a random banked state and let the task place its goal."""
+        recorded = self._recorded_start_knob()
+        if recorded is None:
+            return False
+        if self.state_bank is None or self.state_bank.capacity != recorded.capacity:
+            self.state_bank = StateBank(recorded.capacity, self.model)
+        if rng.uniform() >= recorded.probability or self.state_bank.size == 0:
+            return False
+        self.state_bank.restore(int(rng.integers(self.state_bank.size)), self.data)
+        self.task = self._task_for_recorded_state(self.task, rng)
+        return True
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply one control step (``FRAME_SKIP`` physics substeps).
@@ -224,6 +279,10 @@ class MuscleHandEnv(gym.Env):
         for key, weight in self.knobs.reward_weights.items():  # in order, as the official sum
             reward += weight * terms[key]
         terminated = bool(terms["done"]) or unstable
+        recorded = self._recorded_start_knob()
+        if (recorded is not None and self.state_bank is not None and not terminated
+                and self._counter % recorded.every == 0 and (terms["solved"] or not recorded.solved_only)):
+            self.state_bank.offer(data, self.np_random)
         horizon = self._episode_horizon()
         truncated = not terminated and self._counter >= horizon
         episode = self._episode

@@ -146,6 +146,48 @@ def parse_weights(name: str, weights: Mapping[str, Any], terms: Iterable[str]) -
     return {term: to_float(f"{name}.{term}", weight) for term, weight in weights.items()}
 
 
+@dataclass(frozen=True)
+class RecordedStart:
+    """Starts from simulator states the env recorded in its own earlier episodes.
+
+    Every ``every`` control steps of an episode (only solved steps when ``solved_only``), the
+    whole state (joint angles, velocities, muscle activations) is offered to a bank of at most
+    ``capacity`` states (reservoir sampling: each offered state equally likely to be kept); at a
+    reset, with ``probability``, a random banked state replaces the stage's start and the task
+    places its goal relative to it. The bank lives in the env: it is empty after a restart
+    (``--resume``) and refills as the episodes go on.
+    """
+
+    probability: float
+    capacity: int = 1000
+    every: int = 4
+    solved_only: bool = True
+
+    FIELDS: ClassVar[tuple[str, ...]] = ("probability", "capacity", "every", "solved_only")
+
+
+def parse_recorded_start(name: str, value: Any) -> RecordedStart:
+    """A :class:`RecordedStart` from ``{probability: p, capacity: n, every: k, solved_only: bool}``
+    (only ``probability`` required)."""
+    if isinstance(value, RecordedStart):
+        return value
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{name}: expected a mapping like {{probability: 0.5, capacity: 1000, every: 4}}, "
+                         f"got {value!r}")
+    check_known(f"field of {name}", value, RecordedStart.FIELDS)
+    if "probability" not in value:
+        raise ValueError(f"{name}: 'probability' is required (the share of resets from a recorded state)")
+    probability = parse_probability(f"{name}.probability", value["probability"])
+    if probability == 0:
+        raise ValueError(f"{name}.probability: must be > 0 (write null to turn recorded starts off)")
+    solved_only = value.get("solved_only", True)
+    if not isinstance(solved_only, bool):
+        raise ValueError(f"{name}.solved_only: expected true or false, got {solved_only!r}")
+    whole = count()
+    return RecordedStart(probability, whole(f"{name}.capacity", value.get("capacity", 1000)),
+                         whole(f"{name}.every", value.get("every", 4)), solved_only)
+
+
 # -- declaring a task's knobs --------------------------------------------------------------
 
 DEFAULT_PRESET = "p1"

@@ -436,3 +436,87 @@ def test_render_draws_each_target_as_a_sphere_of_the_solved_radius_coloured_by_i
     balls = [scene.geoms[i] for i in range(scene.ngeom) if scene.geoms[i].objid in env._ball_geoms
              and scene.geoms[i].objtype == int(mujoco.mjtObj.mjOBJ_GEOM)]
     assert len(balls) == 2 and all(b.rgba[3] < 0.5 for b in balls)
+
+
+def test_balls_phase_is_the_angle_of_balls_placed_on_their_targets():
+    for angle in (0.3, 2.356, 4.0, 5.9):
+        env = BaodingEnv(start_angle=angle, rsi_probability=1.0, direction="hold", period="static")
+        env.reset(seed=0)
+        assert env.balls_phase() == pytest.approx(angle, abs=1e-9)
+
+
+def run_episodes(env: BaodingEnv, episodes: int, seed: int) -> list[tuple[bool, float, int]]:
+    """Zero-action episodes; each one's (recorded start, start angle, length) and, stepwise, the
+    states the env may have banked (every step after which the episode went on and was solved)."""
+    env.reset(seed=seed)
+    starts, seen = [], []
+    for _ in range(episodes):
+        _, info = env.reset()
+        start = (env.recorded_start, info["task"].start_angle, env.data.qpos.copy(), env.data.qvel.copy(),
+                 env.data.act.copy())
+        while True:
+            _, _, terminated, truncated, info = env.step(np.zeros(39, dtype=np.float32))
+            if info["solved"] and not terminated:
+                seen.append((env.data.qpos.copy(), env.data.qvel.copy(), env.data.act.copy()))
+            if terminated or truncated:
+                break
+        starts.append(start)
+    return starts, seen
+
+
+def test_recorded_starts_restore_a_state_of_earlier_episodes_with_the_targets_on_its_balls():
+    knobs = dict(direction="ccw", period=20.0, start_angle="uniform", rsi_probability=1.0,
+                 start_offset=[-0.3, 0.3], recorded_start={"probability": 0.5, "capacity": 30, "every": 1})
+    env = BaodingEnv(**knobs)
+    starts, seen = run_episodes(env, 30, seed=4)
+    bank = env.state_bank
+    # Bounded: 30 states kept of every solved step offered (zero actions solve the first steps).
+    assert bank.size == 30 and bank.offered == len(seen) > 30
+    recorded = [s for s in starts if s[0]]
+    assert 8 <= len(recorded) <= 22  # about half of the 29 resets after the first episode
+    assert not starts[0][0]  # nothing banked before the first episode
+    for _, angle, qpos, qvel, act in recorded:
+        # The whole state is one the env saw at a solved step of an earlier episode ...
+        assert any(np.array_equal(qpos, q) and np.array_equal(qvel, v) and np.array_equal(act, a)
+                   for q, v, a in seen)
+    # ... and the targets start on its balls' orbit angle plus an offset within start_offset.
+    probe = BaodingEnv(**knobs)
+    for _, angle, qpos, _, _ in recorded:
+        probe.reset(seed=0)
+        probe.data.qpos[:] = qpos
+        offset = (angle - probe.balls_phase() + np.pi) % (2 * np.pi) - np.pi
+        assert -0.3 <= offset <= 0.3
+    # Same seed, same starts.
+    again, _ = run_episodes(BaodingEnv(**knobs), 30, seed=4)
+    assert [(s[0], s[1]) for s in again] == [(s[0], s[1]) for s in starts]
+
+
+def test_recorded_starts_place_the_targets_on_the_restored_balls():
+    env = BaodingEnv(direction="hold", period="static", start_angle=1.0, rsi_probability=1.0, rsi_height="target",
+                     recorded_start={"probability": 1.0, "every": 1})
+    env.reset(seed=0)
+    env.step(np.zeros(39, dtype=np.float32))  # solved: the balls start on their targets
+    assert env.state_bank.size == 1
+    kept = env.state_bank.qpos[0].copy()
+    env.configure(direction="hold", period="static", start_angle=4.0, rsi_probability=1.0,
+                  recorded_start={"probability": 1.0, "every": 1})
+    env.reset(seed=1)
+    assert env.recorded_start and np.array_equal(env.data.qpos, kept)
+    # The balls moved a few degrees in one step: the targets are back near angle 1.0, not at 4.0.
+    assert env.task.start_angle == pytest.approx(1.0, abs=0.15)
+    for ball, target in zip(env._ball_sites, env._target_sites):
+        assert np.linalg.norm(env.data.site_xpos[ball] - env.data.site_xpos[target]) < 0.005
+
+
+@pytest.mark.parametrize("value, message", [
+    ({"capacity": 10}, "'probability' is required"),
+    ({"probability": 1.5}, "a probability must be in"),
+    ({"probability": 0}, "must be > 0"),
+    ({"probability": 0.5, "capacity": 0}, "recorded_start.capacity: expected a whole number"),
+    ({"probability": 0.5, "evry": 2}, "did you mean 'every'"),
+    ({"probability": 0.5, "solved_only": "yes"}, "expected true or false"),
+    (0.5, "expected a mapping"),
+])
+def test_recorded_start_knob_names_the_problem(value, message):
+    with pytest.raises(ValueError, match=message):
+        BaodingKnobs.parse("p1", recorded_start=value)
