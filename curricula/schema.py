@@ -7,7 +7,7 @@ file, the key path (``stages[2].advance.threshold``), the bad value and what is 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +58,25 @@ class AdvanceRule:
         return self.plateau_gain if self.plateau_steps is not None else None
 
 
+HAND_OFFS = ("best", "last")
+
+
+@dataclass(frozen=True)
+class StageEvaluation:
+    """Deterministic episodes every ``every`` env steps of the stage, as the 2022 winner's
+    EvalCallback: ``episodes`` episodes (seeds 0 .. episodes-1, the same at every evaluation) on
+    ``env`` (``stage``: the stage's own task; or a preset, e.g. ``p1_2022``), each hand joint moved
+    by U(-``start_noise``, ``start_noise``) at reset. The policy of the best mean score is kept; with
+    ``hand_off: best`` the next stage starts from it (weights, optimizer and normalization
+    statistics of that step), with ``last`` from the stage's last policy."""
+
+    every: int = setting(MISSING, integer(low=1))
+    episodes: int = setting(10, integer(low=1))
+    env: str = setting("stage", lambda reader, key, value: reader.string(key, value))
+    start_noise: float = setting(0.0, number(low=0))
+    hand_off: str = setting("best", one_of(*HAND_OFFS))
+
+
 @dataclass(frozen=True)
 class PpoOverrides:
     """PPO settings a stage changes at its start (None: keep the current value)."""
@@ -79,6 +98,7 @@ class Stage:
     distribution: TaskKnobs  # the same, checked and read once: what every env of the stage gets
     advance: AdvanceRule | None  # None: train on this stage until the step budget ends
     ppo: PpoOverrides = PpoOverrides()
+    evaluate: StageEvaluation | None = None  # periodic deterministic evaluation and best-model hand-off
 
 
 @dataclass(frozen=True)
@@ -139,6 +159,20 @@ def _stage_distribution(reader: YamlReader, key: str, task: str, knobs: Mapping[
         raise reader.error(key, str(error)) from None
 
 
+def _stage_evaluation(reader: YamlReader, key: str, task: str, raw: Any) -> StageEvaluation | None:
+    if raw is None:
+        return None
+    if isinstance(raw, Mapping) and "every" not in raw:
+        raise reader.error(f"{key}.every", "missing: env steps between evaluations, e.g. 250000")
+    evaluation = read_settings(reader, key, raw, StageEvaluation)
+    presets = TASK_SPECS[task].knobs.PRESETS
+    if evaluation.env != "stage" and evaluation.env not in presets:
+        raise reader.error(f"{key}.env", f"{evaluation.env!r} is not one of stage, {', '.join(presets)}")
+    if evaluation.start_noise and not TASK_SPECS[task].hand_joints:
+        raise reader.error(f"{key}.start_noise", f"the {task} task declares no hand joints to move")
+    return evaluation
+
+
 def stage_label(index: int, name: str | None = None) -> str:
     """How errors and the console name a stage: counted from 1, with its name."""
     return f"stage {index + 1}" + (f" ({name})" if name else "")
@@ -164,7 +198,7 @@ def load_curriculum(path: str | Path) -> Curriculum:
     stages, seen = [], set()
     for index, stage_raw in enumerate(stages_raw):
         key = stage_label(index)  # stages count from 1, as on the console
-        stage_raw = reader.mapping(key, stage_raw, ("name", "env", "advance", "ppo"))
+        stage_raw = reader.mapping(key, stage_raw, ("name", "env", "advance", "ppo", "evaluate"))
         stage_name = reader.string(f"{key} name", stage_raw.get("name", f"stage_{index + 1}"))
         if stage_name in seen:
             raise reader.error(f"{key} name", f"duplicate stage name {stage_name!r}")
@@ -175,7 +209,8 @@ def load_curriculum(path: str | Path) -> Curriculum:
         distribution = _stage_distribution(reader, f"{key} env", task, env)
         advance = _advance_rule(reader, f"{key} advance", stage_raw.get("advance"))
         ppo = read_settings(reader, f"{key} ppo", stage_raw.get("ppo"), PpoOverrides)
-        stages.append(Stage(stage_name, env, distribution, advance, ppo))
+        evaluation = _stage_evaluation(reader, f"{key} evaluate", task, stage_raw.get("evaluate"))
+        stages.append(Stage(stage_name, env, distribution, advance, ppo, evaluation))
     return Curriculum(name=name, task=task, stages=tuple(stages), path=path)
 
 

@@ -43,6 +43,10 @@ class Transition:
     # The run's training wall time then (None in states written before it was kept). Not part of
     # equality: two runs with the same schedule differ in timing.
     wall_s: float | None = field(default=None, compare=False)
+    # With a stage evaluation: its best mean score, and the step of the policy handed to the next
+    # stage (that of the best evaluation with ``hand_off: best``; None: the stage's last policy).
+    best_evaluated: float | None = None
+    handed_off_step: int | None = None
 
 
 @dataclass
@@ -63,6 +67,12 @@ class CurriculumState:
     # the stage step it was reached at (None: not tracked, or no full window yet).
     best_measured: float | None = None
     best_at_stage_step: int = 0
+    # The current stage's periodic evaluations (``evaluate`` in the curriculum): how many ran,
+    # the last and the best mean score, and the run's env step of the best one.
+    evaluations: int = 0
+    last_evaluated: float | None = None
+    best_evaluated: float | None = None
+    best_evaluated_step: int | None = None
 
     # the current stage ------------------------------------------------------------------
 
@@ -94,10 +104,21 @@ class CurriculumState:
         self.episodes_per_stage[stage] = self.stage_episodes
         self.steps_per_stage[stage] = self.stage_steps
 
-    def end_stage(self, stage: str, decision: str, wall_s: float) -> Transition:
-        """Record the current stage's end (``decision``: passed | timed_out | plateaued | stop)."""
+    def record_evaluation(self, score: float) -> bool:
+        """A periodic evaluation of the current stage at the current step; True when its score is
+        the stage's best so far (strictly above: the earliest of equal scores is kept)."""
+        self.evaluations += 1
+        self.last_evaluated = score
+        if self.best_evaluated is None or score > self.best_evaluated:
+            self.best_evaluated, self.best_evaluated_step = score, self.num_timesteps
+            return True
+        return False
+
+    def end_stage(self, stage: str, decision: str, wall_s: float, handed_off_step: int | None = None) -> Transition:
+        """Record the current stage's end (``decision``: passed | timed_out | plateaued | stop) and
+        the step of the policy it hands on, when not its last."""
         transition = Transition(stage, self.stage_index, decision, self.num_timesteps, self.stage_steps,
-                                self.stage_episodes, self.measured, wall_s)
+                                self.stage_episodes, self.measured, wall_s, self.best_evaluated, handed_off_step)
         self.history.append(transition)
         return transition
 
@@ -108,6 +129,7 @@ class CurriculumState:
         self.stage_episodes = 0
         self.recent = []
         self.best_measured, self.best_at_stage_step = None, 0
+        self.evaluations, self.last_evaluated, self.best_evaluated, self.best_evaluated_step = 0, None, None, None
 
     # the whole run -------------------------------------------------------------------
 

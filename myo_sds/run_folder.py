@@ -274,7 +274,8 @@ class RunFolder:
                              (checkpoint.state, target.state_file)):
             if source.is_file():
                 shutil.copyfile(source, copy)
-        for path in checkpoint:
+        best_step = checkpoint.read_state().best_evaluated_step
+        for path in [*checkpoint, *(self.best_files(best_step) if best_step is not None else ())]:
             if path.is_file():
                 shutil.copyfile(path, target.checkpoint_dir / path.name)
         return target
@@ -352,7 +353,27 @@ class RunFolder:
         for old in self.checkpoint_steps()[:-keep]:
             for path in self.checkpoint(old):
                 path.unlink(missing_ok=True)
+        self._prune_best(state.best_evaluated_step)
         return files
+
+    def best_files(self, steps: int) -> tuple[Path, Path]:
+        """The model and statistics of the stage's best evaluated policy, of env step ``steps``."""
+        return (self.checkpoint_dir / f"best_model_{steps}_steps.zip",
+                self.checkpoint_dir / f"best_vecnormalize_{steps}_steps.pkl")
+
+    def save_best(self, model, venv, steps: int) -> None:
+        """Keep the policy of a stage's new best evaluation (older ones go at the next checkpoint,
+        once no saved state names them)."""
+        self.checkpoint_dir.mkdir(parents=True, exist_ok=True)
+        model_file, statistics = self.best_files(steps)
+        _atomic_save(model_file, model.save)
+        _atomic_save(statistics, lambda tmp: venv.save(str(tmp)))
+
+    def _prune_best(self, keep: int | None) -> None:
+        for path in [*self.checkpoint_dir.glob("best_model_*_steps.zip"),
+                     *self.checkpoint_dir.glob("best_vecnormalize_*_steps.pkl")]:
+            if keep is None or path.name not in {f.name for f in self.best_files(keep)}:
+                path.unlink(missing_ok=True)
 
     def save_final(self, model, venv) -> None:
         _atomic_save(self.final_model, model.save)

@@ -307,3 +307,44 @@ def test_die_curriculum_advances_a_stage(tmp_path):
     assert state.history and state.history[0].stage == "hold-still"
     assert state.history[0].decision == "passed" and state.stage_index == 1
     assert trainer.venv.get_attr("knobs")[0].goal_rotation[0].high == 0.5
+
+
+def test_a_stage_evaluates_periodically_and_hands_its_best_policy_to_the_next(tmp_path, capsys):
+    from myo_sds import evaluation as ev
+    from myo_sds.evaluation.summary import format_summary, summarize
+
+    # Stage 1 cannot pass (threshold 1.0): it runs its 1,024 steps, evaluated every 256, and the
+    # run's budget ends right at the transition, so the final model is the policy handed on.
+    curriculum = CURRICULUM.replace(
+        "advance: {metric: score, threshold: 0.01, window: 8}",
+        "advance: {metric: score, threshold: 1.0, window: 8, max_steps: 1024}\n"
+        "    evaluate: {every: 256, episodes: 3, env: stage, start_noise: 0.02, hand_off: best}")
+    run = tmp_path / "run"
+    state = CurriculumTrainer.start(write_config(tmp_path, total=1024, curriculum=curriculum),
+                                    run_dir=run, progress=False).run()
+    (easy,) = state.history
+    assert easy.decision == "timed_out" and easy.at_step == 1024
+    scores = [e.value for e in scalar_events(RunFolder(run).tensorboard_dir, "eval/score")]
+    assert len(scores) == 4  # at 256, 512, 768 and 1,024 stage steps
+    assert easy.best_evaluated == pytest.approx(max(scores))
+    assert easy.handed_off_step is None or easy.handed_off_step < easy.at_step
+    # The final model is the best evaluated one: evaluated again the same way, it scores the best.
+    ref = ev.resolve_checkpoint(run)
+    again = ev.evaluate(ref, ev.choose_env(ref, "stage:easy", start_noise=0.02), episodes=3, seed=0)
+    assert again.summary()["score"] == pytest.approx(easy.best_evaluated, abs=1e-12)
+    text = format_summary(summarize(run))
+    assert f"best {easy.best_evaluated:.3f}" in text and "handed on" in text
+    # Older best policies are pruned once a checkpoint no longer names them.
+    assert not list(RunFolder(run).checkpoint_dir.glob("best_model_*"))
+
+
+def test_a_stage_evaluation_is_checked_when_read(tmp_path, capsys):
+    for written, message in (("{episodes: 3}", "every: missing"),
+                             ("{every: 256, env: p3}", "'p3' is not one of stage, p1, p1_2022, p2"),
+                             ("{every: 256, hand_off: first}", "hand_off")):
+        curriculum = CURRICULUM.replace("advance: {metric: score, threshold: 0.01, window: 8}",
+                                        "advance: {metric: score, threshold: 0.01, window: 8}\n"
+                                        f"    evaluate: {written}")
+        with pytest.raises(ConfigError, match=message):
+            CurriculumTrainer.start(write_config(tmp_path, total=1024, curriculum=curriculum),
+                                    run_dir=tmp_path / "bad", overwrite=True, progress=False)

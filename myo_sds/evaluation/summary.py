@@ -36,6 +36,12 @@ class StageSummary:
     # The current stage's latest episodes by the targets' start phase: a stage mean that stops
     # rising often hides sectors where the balls are always dropped.
     by_start_phase: dict[str, dict[str, Any]] = field(default_factory=dict)
+    # The stage's periodic evaluations (``evaluate`` in the curriculum): best and last mean score,
+    # the step of the best, and the step of the policy handed to the next stage (None: its last).
+    evaluated_best: float | None = None
+    evaluated_last: float | None = None
+    evaluated_best_step: int | None = None
+    handed_off_step: int | None = None
 
 
 @dataclass
@@ -81,11 +87,14 @@ def summarize(run_dir: str | Path) -> RunSummary:
             base.status, base.env_steps, base.episodes = transition.decision, transition.stage_steps, transition.stage_episodes
             base.wall_s = start_walls[index + 1] - start_walls[index]
             base.measured = None if math.isnan(transition.measured) else transition.measured
+            base.evaluated_best, base.handed_off_step = transition.best_evaluated, transition.handed_off_step
         elif index == state.stage_index:
             base.status = "current" if state.status.value in ("running", "interrupted", "time_limit") else state.status.value
             base.env_steps, base.episodes = state.num_timesteps - state.stage_start_step, state.stage_episodes
             base.wall_s = state.wall_s - start_walls[index]
             base.measured = float(np.mean(state.recent)) if state.recent else None
+            base.evaluated_best, base.evaluated_last = state.best_evaluated, state.last_evaluated
+            base.evaluated_best_step = state.best_evaluated_step
             in_stage = [r for r in records if r.stage_index == index]
             if rule is not None and in_stage:
                 values = _metric_values(in_stage, rule.metric)
@@ -130,7 +139,23 @@ def stage_rows(summary: RunSummary) -> tuple[tuple[str, ...], list[tuple[str, ..
                   if s.metric else "no advancement rule")
         rows.append((f"{s.index} {s.name}", s.status, f"{s.env_steps:,}", f"{s.wall_s / 3600:.2f}", f"{s.episodes:,}",
                      target))
+    if any(s.evaluated_best is not None for s in summary.stages):
+        return STAGE_COLUMNS + ("evaluated (deterministic)",), [
+            row + (_evaluated(s),) for row, s in zip(rows, summary.stages)]
     return STAGE_COLUMNS, rows
+
+
+def _evaluated(s: StageSummary) -> str:
+    if s.evaluated_best is None:
+        return "-"
+    text = f"best {s.evaluated_best:.3f}"
+    if s.evaluated_best_step is not None:
+        text += f" at {_steps(s.evaluated_best_step)}"
+    if s.evaluated_last is not None:
+        text += f", last {s.evaluated_last:.3f}"
+    if s.status not in ("current", "not reached"):
+        text += f"; handed on {'the best' if s.handed_off_step is not None else 'its last'}"
+    return text
 
 
 def _status_line(summary: RunSummary, now: float) -> str:

@@ -47,6 +47,7 @@ from myo_sds.training.factory import (
 )
 from myo_sds.training.progress import StageProgressBar
 from myo_sds.training.rollout import LocalRollouts, RolloutCollector, WorkerLost
+from myo_sds.training.stage_evaluation import StageEvaluator
 
 RESUMABLE = (RunStatus.RUNNING, RunStatus.INTERRUPTED, RunStatus.TIME_LIMIT)
 
@@ -93,6 +94,8 @@ class CurriculumTrainer:
                                           run_wall_s=lambda: self.state.wall_s + time.perf_counter() - self.iteration_started_at,
                                           update_threads=self.update_threads)
         self.minibatch_hook = model.policy.optimizer.register_step_pre_hook(self.episode_callback.before_optimizer_step)
+        self.stage_evaluator = StageEvaluator(config.curriculum.task)
+        self._last_evaluation_step: int | None = None
         self.apply_ppo_settings()
 
     @property
@@ -326,15 +329,58 @@ class CurriculumTrainer:
         logger.record("curriculum/stage_steps", state.stage_steps)
         if not math.isnan(state.measured):
             logger.record("curriculum/measured", state.measured)
+        evaluation = self.stage.evaluate
+        if evaluation is not None and state.stage_steps >= (state.evaluations + 1) * evaluation.every:
+            self._evaluate_stage()
         decision = decide(rule, state)
         if decision is not Decision.STAY:
             self._transition(decision)
         logger.dump(model.num_timesteps)
 
+    def _evaluate_stage(self) -> None:
+        """The stage's periodic evaluation at this step; a new best policy is kept."""
+        state, model = self.state, self.model
+        score = self.stage_evaluator.score(model, self.venv, self.stage)
+        self._last_evaluation_step = state.num_timesteps
+        if state.record_evaluation(score):
+            self.folder.save_best(model, self.venv, state.num_timesteps)
+        model.logger.record("eval/score", score)
+        model.logger.record("eval/best_score", state.best_evaluated)
+        self.progress_bar.write(f"{stage_label(state.stage_index, self.stage.name)} evaluation at step "
+                                f"{state.num_timesteps}: {score:.3f} (best {state.best_evaluated:.3f} at step "
+                                f"{state.best_evaluated_step})")
+
+    def _hand_off(self) -> int | None:
+        """With ``hand_off: best``, load the stage's best evaluated policy (weights, optimizer,
+        normalization statistics) to start the next stage from; the step it came from, or None
+        when the stage hands on its last policy."""
+        from myo_sds.published import load_statistics
+
+        evaluation, state = self.stage.evaluate, self.state
+        if evaluation is None or evaluation.hand_off != "best":
+            return None
+        if self._last_evaluation_step != state.num_timesteps:
+            self._evaluate_stage()  # the last policy competes too
+        best = state.best_evaluated_step
+        if best is None or best == state.num_timesteps:
+            return None
+        model_file, statistics_file = self.folder.best_files(best)
+        if not (model_file.is_file() and statistics_file.is_file()):
+            self.progress_bar.write(f"the best policy of step {best} is missing ({model_file}); the stage hands on "
+                                    "its last policy")
+            return None
+        self.model.set_parameters(str(model_file), exact_match=True, device=self.model.device)
+        statistics = load_statistics(statistics_file)
+        self.venv.obs_rms, self.venv.ret_rms = statistics.obs_rms, statistics.ret_rms
+        self.progress_bar.write(f"the next stage starts from the best evaluated policy: step {best}, score "
+                                f"{state.best_evaluated:.3f}")
+        return best
+
     def _transition(self, decision: Decision) -> None:
         state, model, config = self.state, self.model, self.config
         stage = self.stage
-        measured = state.end_stage(stage.name, decision.value, state.wall_s).measured
+        handed_off = self._hand_off()  # a stopped run's final model is its best too
+        measured = state.end_stage(stage.name, decision.value, state.wall_s, handed_off).measured
         verdict = {Decision.PASSED: "passed", Decision.TIMED_OUT: "ended unpassed (max_steps)",
                    Decision.PLATEAUED: "ended unpassed (plateau_steps without a gain of plateau_gain)",
                    Decision.STOP: "ended unpassed"}[decision]
@@ -357,6 +403,7 @@ class CurriculumTrainer:
     def close(self) -> None:
         """Release the envs (and a Ray backend's workers)."""
         self.rollouts.close()
+        self.stage_evaluator.close()
 
     def save_checkpoint(self) -> Path:
         """Model, statistics, curriculum state and random streams of this step (``run_folder``)."""
