@@ -271,10 +271,15 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     if "output_dir" in raw:
         values["output_dir"] = Path(reader.string("output_dir", raw["output_dir"]))
     values["policy"] = read_settings(reader, "policy", raw.get("policy"), PolicyConfig)
-    for key, default in (("action_mean_bound", 0.0), ("action_head_lr_scale", 1.0)):
+    for key, default in (("action_mean_bound", 0.0), ("action_head_lr_scale", 1.0), ("exploration", "gaussian")):
         if getattr(values["policy"], key) != default and not values["policy"].fast_lstm_update:
             raise reader.error(f"policy.{key}", "needs policy.fast_lstm_update: true "
                                "(it lives in the fast policy class)")
+    if values["policy"].exploration == "lattice":
+        for key, default in (("action_mean_bound", 0.0), ("action_head_lr_scale", 1.0)):
+            if getattr(values["policy"], key) != default:
+                raise reader.error(f"policy.{key}", "applies to the Gaussian policy's mean only; "
+                                   "with exploration: lattice leave it at its default")
     values["ppo"] = read_settings(reader, "ppo", raw.get("ppo"), PpoConfig)
     values["normalize"] = read_settings(reader, "normalize", raw.get("normalize"), NormalizeConfig)
     values["rollout"] = read_settings(reader, "rollout", raw.get("rollout"), RolloutConfig)

@@ -14,6 +14,7 @@ from myo_sds.curricula.yaml_reader import YamlReader
 ACTIVATIONS = ("relu", "tanh", "elu", "leaky_relu")
 VEC_ENVS = ("thread", "dummy", "subproc")
 ROLLOUT_BACKENDS = ("local", "ray")
+EXPLORATIONS = ("gaussian", "lattice")
 
 # -- declaring a setting: its default and how a written value is checked and read ----------
 
@@ -98,6 +99,13 @@ class PolicyConfig:
     # The actor's output layer learns this many times as fast as the rest (> 0; through a
     # reparametrization, myo_sds/policy.py). Needs fast_lstm_update.
     action_head_lr_scale: float = setting(1.0, number(low=0, strict_low=True))
+    # gaussian: independent noise on each muscle (sb3-contrib's); lattice: noise in the latent
+    # state, correlated across muscles and state-dependent (myo_sds/lattice.py). Needs fast_lstm_update.
+    exploration: str = setting("gaussian", one_of(*EXPLORATIONS))
+    lattice_alpha: float = setting(1.0, number(low=0))  # weight of the latent noise (0: action noise only)
+    lattice_std_reg: float = setting(0.0, number(low=0))  # extra independent action std
+    lattice_full_std: bool = setting(False, boolean)  # one std per noise-matrix entry, not per latent feature
+    noise_resample_every: int = setting(1, integer(low=1))  # control steps between Lattice noise draws
 
 
 @dataclass(frozen=True)

@@ -70,6 +70,35 @@ class SequenceLstmPolicy(RecurrentActorCriticPolicy):
         return th.flatten(output.transpose(0, 1), start_dim=0, end_dim=1), lstm_states
 
 
+class LatticeLstmPolicy(SequenceLstmPolicy):
+    """:class:`SequenceLstmPolicy` exploring with Lattice (:mod:`myo_sds.lattice`): the same
+    networks, with the action distribution and its ``log_std`` replaced. Built with
+    ``use_sde=True`` (RecurrentPPO then redraws the noise matrices every ``sde_sample_freq``
+    steps); the mean is ``action_net(latent)`` as for the Gaussian policy."""
+
+    def __init__(self, observation_space, action_space, lr_schedule, *args, lattice_alpha: float = 1.0,
+                 lattice_std_reg: float = 0.0, lattice_std_clip: tuple[float, float] = (1e-3, 10.0), **kwargs):
+        from stable_baselines3.common.preprocessing import get_action_dim
+
+        from myo_sds.lattice import LatticeNoise
+
+        self.lattice_alpha, self.lattice_std_reg = lattice_alpha, lattice_std_reg
+        self.lattice_std_clip = tuple(lattice_std_clip)
+        kwargs.setdefault("use_expln", True)
+        kwargs.setdefault("full_std", False)
+        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
+        if not self.use_sde:
+            raise ValueError("LatticeLstmPolicy needs use_sde=True (RecurrentPPO(..., use_sde=True))")
+        self.action_dist = LatticeNoise(get_action_dim(action_space), full_std=self.dist_kwargs["full_std"],
+                                        use_expln=self.dist_kwargs["use_expln"], alpha=lattice_alpha,
+                                        std_clip=self.lattice_std_clip, std_reg=lattice_std_reg)
+        self._build(lr_schedule)  # the action layer and log_std of the Lattice distribution, a new optimizer
+
+    def _get_constructor_parameters(self) -> dict:
+        return {**super()._get_constructor_parameters(), "lattice_alpha": self.lattice_alpha,
+                "lattice_std_reg": self.lattice_std_reg, "lattice_std_clip": self.lattice_std_clip}
+
+
 # Module paths the policy class was saved under: checkpoints pickle it by reference.
 POLICY_MODULES = ("myo_sds.policy", "curricula.policy")
 
@@ -93,5 +122,6 @@ def load_model(path: str | Path, **kwargs: Any):
     except (OSError, KeyError, ValueError, zipfile.BadZipFile):
         saved = {}  # RecurrentPPO.load reports an unreadable archive itself
     if isinstance(saved, dict) and saved.get("__module__") in POLICY_MODULES:
-        custom_objects.setdefault("policy_class", SequenceLstmPolicy)
+        lattice = "Lattice" in str(saved.get("__init__", "")) or "Lattice" in str(saved.get(":serialized:", ""))
+        custom_objects.setdefault("policy_class", LatticeLstmPolicy if lattice else SequenceLstmPolicy)
     return RecurrentPPO.load(path, custom_objects=custom_objects, **kwargs)

@@ -79,7 +79,7 @@ def build_model(config: RunConfig, venv, settings: PpoSettings):
     import torch
     from sb3_contrib import RecurrentPPO
 
-    from myo_sds.policy import SequenceLstmPolicy
+    from myo_sds.policy import LatticeLstmPolicy, SequenceLstmPolicy
 
     activations = {"relu": torch.nn.ReLU, "tanh": torch.nn.Tanh, "elu": torch.nn.ELU,
                    "leaky_relu": torch.nn.LeakyReLU}
@@ -93,11 +93,16 @@ def build_model(config: RunConfig, venv, settings: PpoSettings):
         "log_std_init": policy.log_std_init,
         "ortho_init": policy.ortho_init,
     }
+    lattice = policy.exploration == "lattice"
     if policy.fast_lstm_update:
         policy_kwargs["action_mean_bound"] = policy.action_mean_bound
         policy_kwargs["action_head_lr_scale"] = policy.action_head_lr_scale
+    if lattice:
+        policy_kwargs.update(lattice_alpha=policy.lattice_alpha, lattice_std_reg=policy.lattice_std_reg,
+                             full_std=policy.lattice_full_std)
+    policy_class = (LatticeLstmPolicy if lattice else SequenceLstmPolicy) if policy.fast_lstm_update else "MlpLstmPolicy"
     return RecurrentPPO(
-        SequenceLstmPolicy if policy.fast_lstm_update else "MlpLstmPolicy", venv,
+        policy_class, venv, use_sde=lattice, sde_sample_freq=policy.noise_resample_every if lattice else -1,
         learning_rate=settings.learning_rate, n_steps=settings.n_steps, batch_size=settings.batch_size,
         n_epochs=settings.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=settings.clip_range,
         ent_coef=settings.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm,
@@ -134,7 +139,10 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
     from myo_sds.published import load_statistics
 
     try:
-        model.set_parameters(str(model_file), exact_match=True, device=model.device)
+        if _gaussian_into_lattice(model, model_file):
+            _load_mean_network(model, model_file)
+        else:
+            model.set_parameters(str(model_file), exact_match=True, device=model.device)
     except (RuntimeError, ValueError, KeyError) as error:
         first_line = str(error).strip().splitlines()[0]
         raise ConfigError(f"--init-from {model_file}: its network does not fit this config's `policy` "
@@ -146,6 +154,31 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
             raise ConfigError(f"--init-from {statistics}: observations of shape {trained.obs_rms.mean.shape}, "
                               f"this task's are {venv.obs_rms.mean.shape}")
         venv.obs_rms, venv.ret_rms = trained.obs_rms, trained.ret_rms
+
+
+def _gaussian_into_lattice(model, model_file: Path) -> bool:
+    """Whether a Lattice model is initialized from a Gaussian policy's checkpoint."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    from myo_sds.policy import LatticeLstmPolicy
+
+    if not isinstance(model.policy, LatticeLstmPolicy):
+        return False
+    _, params, _ = load_from_zip_file(str(model_file), load_data=False, device="cpu")
+    return params["policy"]["log_std"].shape != model.policy.log_std.shape
+
+
+def _load_mean_network(model, model_file: Path) -> None:
+    """Every network of a Gaussian checkpoint but its ``log_std`` (Lattice's has another shape
+    and keeps its initial value); the optimizer starts afresh, its moments being of other
+    parameters. The Lattice policy then acts as the Gaussian one on average (the same mean)."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    _, params, _ = load_from_zip_file(str(model_file), load_data=False, device=model.device)
+    weights = {k: v for k, v in params["policy"].items() if k != "log_std"}
+    missing, unexpected = model.policy.load_state_dict(weights, strict=False)
+    if missing != ["log_std"] or unexpected:
+        raise RuntimeError(f"networks differ: missing {missing}, unexpected {unexpected}")
 
 
 def apply_ppo_settings(model, settings: PpoSettings) -> None:

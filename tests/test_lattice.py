@@ -1,0 +1,131 @@
+"""Lattice exploration (myo_sds/lattice.py) against hand-computed covariances and
+log-probabilities, its samples, and a Lattice policy that trains, resumes and evaluates."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch as th
+
+from myo_sds.lattice import LatticeNoise
+
+
+def small_distribution(full_std: bool = False, alpha: float = 1.0, std_reg: float = 0.0) -> LatticeNoise:
+    """A = 2 actions, d = 2 latent features, exp (not expln) stds, known weights."""
+    dist = LatticeNoise(2, full_std=full_std, use_expln=False, alpha=alpha, std_reg=std_reg)
+    net, _ = dist.proba_distribution_net(latent_dim=2, log_std_init=0.0)
+    with th.no_grad():
+        net.weight.copy_(th.tensor([[1.0, 2.0], [0.0, 3.0]]))
+        net.bias.copy_(th.tensor([0.5, -0.5]))
+    return dist
+
+
+def test_covariance_and_log_probability_match_the_hand_computed_ones():
+    dist = small_distribution(alpha=2.0, std_reg=0.1)
+    # log_std column 0: the latent matrix's std per latent feature, column 1: the action matrix's.
+    log_std = th.log(th.tensor([[0.3, 0.2], [0.4, 0.5]])) + 0.5 * math.log(2)  # cancels the 1/sqrt(d) scaling
+    x = th.tensor([[1.0, 2.0]])
+    mean = dist.mean_actions_net(x)
+    dist.proba_distribution(mean, log_std, x)
+    # By hand: v_j = sum_i x_i^2 s_i^2 = 1 * 0.09 + 4 * 0.16 = 0.73 for each latent j;
+    # u_k = 1 * 0.04 + 4 * 0.25 + 0.1^2 (+ 1e-6) = 1.05 for each action k.
+    # Sigma = alpha^2 * 0.73 * W W^T + 1.05 I, W W^T = [[5, 6], [6, 9]].
+    expected = 4 * 0.73 * np.array([[5.0, 6.0], [6.0, 9.0]]) + (1.05 + 1e-6) * np.eye(2)
+    assert np.allclose(dist.distribution.covariance_matrix[0].detach().numpy(), expected, rtol=1e-6)
+    assert np.allclose(mean.detach().numpy(), [[5.5, 5.5]])  # W x + b
+    action = np.array([6.0, 4.0])
+    diff = action - np.array([5.5, 5.5])
+    by_hand = -0.5 * diff @ np.linalg.solve(expected, diff) - 0.5 * math.log(np.linalg.det(2 * math.pi * expected))
+    assert dist.log_prob(th.tensor(action[None], dtype=th.float32)).item() == pytest.approx(by_hand, rel=1e-5)
+    entropy = 0.5 * math.log(np.linalg.det(2 * math.pi * math.e * expected))
+    assert dist.entropy().item() == pytest.approx(entropy, rel=1e-5)
+    assert np.allclose(dist.mode().detach().numpy(), [[5.5, 5.5]])
+
+
+def test_full_std_gives_each_matrix_entry_its_own_std():
+    dist = small_distribution(full_std=True)
+    s = np.array([[0.1, 0.2], [0.3, 0.4]])  # P_x entries
+    t = np.array([[0.5, 0.6], [0.7, 0.8]])  # P_a entries
+    log_std = th.log(th.tensor(np.hstack([s, t]), dtype=th.float32)) + 0.5 * math.log(2)
+    x = th.tensor([[2.0, -1.0]])
+    dist.proba_distribution(dist.mean_actions_net(x), log_std, x)
+    v = 4 * s[0] ** 2 + 1 * s[1] ** 2  # per latent j
+    u = 4 * t[0] ** 2 + 1 * t[1] ** 2  # per action k
+    w = np.array([[1.0, 2.0], [0.0, 3.0]])
+    expected = w @ np.diag(v) @ w.T + np.diag(u + 1e-6)
+    assert np.allclose(dist.distribution.covariance_matrix[0].detach().numpy(), expected, rtol=1e-6)
+
+
+def test_samples_have_the_distribution_s_mean_and_covariance():
+    th.manual_seed(0)
+    dist = small_distribution(alpha=1.0)
+    log_std = th.log(th.tensor([[0.3, 0.2], [0.4, 0.5]]))
+    x = th.tensor([[1.0, 2.0]]).repeat(20000, 1)
+    dist.sample_weights(log_std, batch_size=len(x))  # a fresh pair of matrices for every row
+    dist.proba_distribution(dist.mean_actions_net(x), log_std, x)
+    samples = dist.sample().detach().numpy()
+    expected = dist.distribution.covariance_matrix[0].detach().numpy()
+    assert np.allclose(samples.mean(axis=0), [5.5, 5.5], atol=0.05)
+    assert np.allclose(np.cov(samples.T), expected, rtol=0.05)
+    # Correlated across actions: both rows of W load on the second latent feature.
+    correlation = expected[0, 1] / math.sqrt(expected[0, 0] * expected[1, 1])
+    assert correlation > 0.5 and np.corrcoef(samples.T)[0, 1] == pytest.approx(correlation, abs=0.02)
+
+
+def test_stds_are_clipped_and_scaled_by_the_latent_size():
+    dist = LatticeNoise(3, use_expln=False, std_clip=(1e-3, 2.0))
+    dist.proba_distribution_net(latent_dim=4)
+    latent_std, action_std = dist.get_std(th.tensor([[10.0, -20.0]] * 4))
+    assert latent_std.shape == (4, 4) and action_std.shape == (4, 3)
+    assert th.allclose(latent_std, th.full((4, 4), 2.0 / 2))  # clipped to 2, over sqrt(4)
+    assert th.allclose(action_std, th.full((4, 3), 1e-3 / 2))
+
+
+def tiny_config(folder, total: int, exploration: str = "lattice"):
+    from tiny_run import write_config
+
+    # As the recipe's network: the LSTM feeds the heads directly (a ReLU layer's all-zero latent
+    # would give Lattice no noise to explore with).
+    path = write_config(folder, total)
+    path.write_text(path.read_text().replace("net_arch: [16], log_std_init: -1.0}",
+                                             f"net_arch: [], log_std_init: 0.0, exploration: {exploration}}}"))
+    return path
+
+
+def test_a_lattice_policy_trains_resumes_and_evaluates(tmp_path):
+    from myo_sds import evaluation as ev
+    from myo_sds.policy import LatticeLstmPolicy, load_model
+    from myo_sds.run_folder import RunFolder
+    from myo_sds.training import CurriculumTrainer
+
+    run = tmp_path / "run"
+    trainer = CurriculumTrainer.start(tiny_config(tmp_path, 1024), run_dir=run, progress=False)
+    model = trainer.model
+    assert isinstance(model.policy, LatticeLstmPolicy) and model.use_sde and model.sde_sample_freq == 1
+    assert model.policy.log_std.shape == (16, 2)
+    before = model.policy.log_std.detach().clone()
+    trainer.run()
+    trainer.close()
+    assert not th.equal(before, model.policy.log_std.detach())  # the noise scale is learned
+    # Resumes with its distribution, and trains on.
+    state = CurriculumTrainer.resume(run, progress=False, total_steps=2048).run()
+    assert state.num_timesteps >= 2048
+    loaded = load_model(RunFolder(run).final_model, device="cpu")
+    assert isinstance(loaded.policy, LatticeLstmPolicy) and loaded.policy.lattice_alpha == 1.0
+    ref = ev.resolve_checkpoint(run)
+    report = ev.evaluate(ref, ev.choose_env(ref, "p1"), episodes=2)
+    assert len(report.episodes) == 2
+    # A Gaussian checkpoint starts Lattice with the same mean network (and Lattice's own noise).
+    (tmp_path / "g").mkdir()
+    CurriculumTrainer.start(tiny_config(tmp_path / "g", 256, "gaussian"), run_dir=tmp_path / "g" / "run",
+                            progress=False).run()
+    gaussian = ev.resolve_checkpoint(tmp_path / "g" / "run")
+    started = CurriculumTrainer.start(tiny_config(tmp_path, 1024), run_dir=tmp_path / "from_gaussian",
+                                      progress=False, init_from=gaussian.model)
+    source = load_model(gaussian.model, device="cpu").policy.state_dict()
+    for name, value in started.model.policy.state_dict().items():
+        if name != "log_std":
+            assert th.equal(value, source[name]), name
+    started.close()
