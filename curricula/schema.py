@@ -247,7 +247,7 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     """
     path = Path(path)
     reader = YamlReader(path)
-    raw = dict(reader.mapping("", load_yaml(path, "run config") or {}, RUN_KEYS))
+    raw = dict(reader.mapping("", reader.read_with_bases("run config"), RUN_KEYS))
     for assignment in overrides:
         _set_key(reader, raw, assignment)
     reader.mapping("", raw, RUN_KEYS)

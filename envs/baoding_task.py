@@ -42,7 +42,7 @@ OFFICIAL_START_ANGLE = math.pi / 4  # myosuite 3.0.0; ball 2 starts pi behind
 # The 2022 envs' start angle: each target then sits within the solved radius of its ball.
 ON_BALLS_START_ANGLE = 3 * math.pi / 4
 # How an RSI start sets the balls' height; the target sites' orbit is tilted against the palm, so
-# a ball at its target's height sits up to 7 mm inside the palm at some phases (benchmarks/RESULTS.md).
+# a ball at its target's height sits up to 7 mm inside the palm at some phases (experiments/RESULTS.md).
 RSI_HEIGHTS = ("clear", "target", "rest")
 ORBIT_CENTER = (-0.0125, -0.07)  # m, in the frame of the palm body carrying the target sites
 NOMINAL_FRICTION = (1.0, 0.005, 0.0001)

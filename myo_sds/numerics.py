@@ -4,7 +4,7 @@ A Baoding episode is chaotic: a last-bit difference in one matrix product grows,
 closed-loop steps, into a different episode. The libraries pick their kernels by the CPU they
 find: MKL (torch's matrix products) has its own code paths per CPU maker and vector width,
 torch and NumPy dispatch to AVX-512 where the CPU has it. Measured on one policy and one
-start (``benchmarks/RESULTS.md``, "Scores that depend on the CPU"): the shipped P1 policy
+start (``experiments/RESULTS.md``, "Scores that depend on the CPU"): the shipped P1 policy
 solved 139 of 200 steps on an Intel Xeon and 61 on an AMD EPYC with the same software;
 setting MKL's reproducibility branch alone moved the EPYC's episode to 123.
 

@@ -3,7 +3,7 @@
 torch's OpenMP threads spin-wait for each other. On an idle 2-core machine two update threads
 are ~1.3x faster than one on the Baoding network; when another process holds a core, a
 descheduled thread stalls every op and the same update runs 10-100x slower
-(``benchmarks/RESULTS.md``, "Shared machine"). So the update runs on all the CPUs this process
+(``experiments/RESULTS.md``, "Shared machine"). So the update runs on all the CPUs this process
 may use while no other process is using them, and on one thread while others are (measured
 from the kernel's CPU time counters, not from our own timings, which vary with the minibatch's
 layout). On a quiet machine the choice never changes, so runs stay bit-reproducible; torch

@@ -33,13 +33,43 @@ def write(tmp_path: Path, text: str, name: str = "c.yaml") -> Path:
     return path
 
 
-def test_bundled_curricula_and_configs_load():
-    for path in sorted((REPO / "curricula").glob("*.yaml")):
-        curriculum = load_curriculum(path)
-        assert curriculum.stages, path
-    for path in sorted((REPO / "configs").glob("*.yaml")):
-        config = load_run_config(path)
-        assert config.curriculum.stages, path
+def test_bundled_and_experiment_curricula_and_configs_load():
+    for folder in (REPO, REPO / "experiments"):
+        for path in sorted((folder / "curricula").glob("*.yaml")):
+            curriculum = load_curriculum(path)
+            assert curriculum.stages, path
+        for path in sorted((folder / "configs").glob("*.yaml")):
+            config = load_run_config(path)
+            assert config.curriculum.stages, path
+
+
+def test_a_config_inherits_its_base_and_overrides_key_by_key(tmp_path):
+    (tmp_path / "product").mkdir()
+    (tmp_path / "exp").mkdir()
+    write(tmp_path / "product", GOOD_CURRICULUM, "cur.yaml")
+    write(tmp_path / "product", "curriculum: cur.yaml\nseed: 3\nn_envs: 2\n"
+          "ppo: {learning_rate: 3.0e-4, n_steps: 64, batch_size: 64, n_epochs: 10}\n", "base.yaml")
+    child = write(tmp_path / "exp", "base: ../product/base.yaml\nppo: {n_epochs: 5}\nseed: 7\n", "child.yaml")
+    config = load_run_config(child)
+    # The child's values win; the rest of ppo stays the base's; the base's curriculum path is
+    # read relative to the base.
+    assert (config.seed, config.n_envs, config.ppo.n_epochs, config.ppo.learning_rate) == (7, 2, 5, 3.0e-4)
+    assert config.curriculum_path == (tmp_path / "product" / "cur.yaml").resolve()
+    assert "base" not in config.source and config.source["ppo"]["n_steps"] == 64
+    # A grandchild, and an error in a value a base wrote names that base's file.
+    write(tmp_path / "exp", "base: child.yaml\nn_envs: 4\n", "grandchild.yaml")
+    assert load_run_config(tmp_path / "exp" / "grandchild.yaml").ppo.n_epochs == 5
+    write(tmp_path / "product", "curriculum: cur.yaml\nppo: {gamma: 3, n_steps: 64, batch_size: 64}\n", "bad.yaml")
+    write(tmp_path / "exp", "base: ../product/bad.yaml\nseed: 1\n", "on_bad.yaml")
+    with pytest.raises(ConfigError, match=re.escape(f"{(tmp_path / 'product' / 'bad.yaml').resolve()}: ppo.gamma: must be <= 1")):
+        load_run_config(tmp_path / "exp" / "on_bad.yaml")
+    write(tmp_path / "exp", "base: loop_b.yaml\n", "loop_a.yaml")
+    write(tmp_path / "exp", "base: loop_a.yaml\n", "loop_b.yaml")
+    with pytest.raises(ConfigError, match="a cycle of bases"):
+        load_run_config(tmp_path / "exp" / "loop_a.yaml")
+    write(tmp_path / "exp", "base: nowhere.yaml\n", "orphan.yaml")
+    with pytest.raises(ConfigError, match="base: run config file not found"):
+        load_run_config(tmp_path / "exp" / "orphan.yaml")
 
 
 def test_good_curriculum_is_parsed_with_defaults_merged(tmp_path):
