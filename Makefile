@@ -17,11 +17,12 @@ $(VENV)/.installed: pyproject.toml
 
 setup: $(VENV)/.installed
 
-# The quickstart run beside two trained policies: the 2022 winner's published phase-1 policy
-# (its video: it turns the balls on the 2022 start) and the shipped P1 policy, on both P1 starts.
+# The quickstart run beside two trained policies: the 2022 winner's published phase-1 policy and
+# ours from scratch, on the 2022 start without and with start noise; the video shows the winner's
+# best and worst episode with noise (one turns the balls, one drops them).
 demo: setup
 	$(PY) train.py --config configs/quickstart.yaml --run-dir $(RUN_DIR) --overwrite
-	$(PY) evaluate.py models/reference/stiff_fingers_2022_p1 models/baoding_p1 $(RUN_DIR) --env p1_2022,p1 --episodes 5 --official --json $(RUN_DIR)/evaluation.json --plots $(RUN_DIR)/plots --video $(RUN_DIR)/episodes.mp4
+	$(PY) evaluate.py models/reference/stiff_fingers_2022_p1 models/baoding_p1_2022 $(RUN_DIR) --env p1_2022 --start-noise 0,0.02 --episodes 8 --official --json $(RUN_DIR)/evaluation.json --plots $(RUN_DIR)/plots --video $(RUN_DIR)/episodes.mp4
 
 test: setup
 	$(PY) -m ruff check .

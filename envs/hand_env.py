@@ -321,6 +321,9 @@ class MuscleHandEnv(gym.Env):
             return None
         if self._renderer is None:
             self._renderer = make_renderer(self.model, 480, 640)
+            # Shadows and floor reflections triple the cost of a frame in software rendering.
+            for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION):
+                self._renderer.scene.flags[flag] = 0
             self._camera.azimuth, self._camera.elevation, self._camera.distance = self.CAMERA
         mujoco.mj_forward(self.model, self.data)  # derived quantities drawn (tendons) need it
         self._camera.lookat[:] = self._camera_target()

@@ -326,7 +326,7 @@ def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, cap
     assert "not a run folder" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("curriculum, task", [("baoding_p1_2022_rest", "p1_2022"), ("baoding_p1", "p1"),
+@pytest.mark.parametrize("curriculum, task", [("baoding_p1_2022", "p1_2022"), ("baoding_p1", "p1"),
                                               ("quickstart", "p1")])
 def test_the_model_card_evaluates_on_the_task_the_curriculum_ends_on(tiny_run, tmp_path, curriculum, task):
     """Its last stage's preset whatever its rewards (p1_2022's with the winner's; p1 as it is); a

@@ -49,7 +49,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--json", type=Path, help="write the numbers (and per-episode results) here")
     parser.add_argument("--plots", type=Path, metavar="DIR", help="learning curve and score histogram PNGs")
     parser.add_argument("--video", type=Path, metavar="FILE",
-                        help="MP4 of the best and worst episodes of the first evaluation, replayed on our env")
+                        help="MP4 of the best and worst episodes of the first evaluation (the first with start "
+                             "noise, if any), replayed on our env")
     parser.add_argument("--video-episodes", type=int, default=2, help="episodes in the video: half best, half worst")
     args = parser.parse_args(argv)
     if args.episodes < 1:
@@ -118,8 +119,10 @@ def main(argv: list[str] | None = None) -> int:
             for ref in refs:
                 print(_learning_curve(ev, ref, args.plots))
         if args.video:
-            picks = ev.chosen_episodes(reports[0], args.video_episodes)
-            frames = ev.record_video(refs[0], choices[0][0], args.video, picks)
+            # Episodes with start noise differ from each other; without it a fixed start repeats one.
+            shown = next((r for r in reports if r.env.start_noise and not r.env.official), reports[0])
+            picks = ev.chosen_episodes(shown, args.video_episodes)
+            frames = ev.record_video(shown.checkpoint, shown.env, args.video, picks)
             print(f"wrote {args.video} ({frames} frames: {'; '.join(f'{c} (seed {s})' for s, c in picks)})")
     except (ev.EvaluationError, ConfigError, RuntimeError) as error:
         print(f"error: {error}", file=sys.stderr)

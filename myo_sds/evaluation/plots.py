@@ -111,29 +111,40 @@ def _stage_thresholds(run: RunFolder, history: list[Transition], last_step: int)
 
 
 def plot_score_histogram(reports: Sequence[EvaluationReport], path: Path) -> None:
-    """Episode scores of each report, as outlines over bins fitted to the data, each mean marked."""
+    """Episode scores as small multiples: one row per policy, one panel per env it was
+    evaluated on, each panel's mean dashed and written in its title (scores lie in [0, 1])."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4))
-    scores = [np.array([e.score for e in report.episodes]) for report in reports]
-    top = max([0.01] + [float(s.max()) for s in scores if len(s)])
-    bins = np.linspace(0, top * 1.05, 21)
-    colors = plt.get_cmap("tab10")
-    for index, (report, values) in enumerate(zip(reports, scores)):
-        color = colors(index % 10)
-        # Earlier series drawn wider, so a later one with the same counts leaves them visible.
-        ax.hist(values, bins=bins, histtype="step", linewidth=1.5 + 2.0 * (len(reports) - 1 - index), color=color,
-                label=f"{report.checkpoint.label} on {report.env.label} (mean {values.mean():.3f})")
-        ax.axvline(values.mean(), color=color, linestyle="--", linewidth=1)
-    ax.set_xlabel("episode score (solved steps / horizon)")
-    ax.set_ylabel("episodes")
-    ax.legend(fontsize=7)
+    policies = list(dict.fromkeys(r.checkpoint.label for r in reports))
+    envs = list(dict.fromkeys(r.env.label for r in reports))
+    fig, axes = plt.subplots(len(policies), len(envs), figsize=(2.6 * len(envs) + 0.6, 1.9 * len(policies) + 0.5),
+                             sharex=True, squeeze=False)
+    bins = np.linspace(0.0, 1.0, 21)
+    for row, policy in enumerate(policies):
+        for column, env in enumerate(envs):
+            ax = axes[row][column]
+            found = [r for r in reports if r.checkpoint.label == policy and r.env.label == env]
+            if not found:
+                ax.set_axis_off()
+                continue
+            values = np.array([e.score for e in found[0].episodes])
+            ax.hist(values, bins=bins, color=plt.get_cmap("tab10")(row % 10), alpha=0.8)
+            ax.axvline(values.mean(), color="black", linestyle="--", linewidth=1)
+            ax.set_title(f"{env}: mean {values.mean():.3f}", fontsize=8)
+            ax.tick_params(labelsize=7)
+            if column == 0:
+                ax.set_ylabel(_short(policy), fontsize=7)
+            if row == len(policies) - 1:
+                ax.set_xlabel("episode score", fontsize=7)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
 
+def _short(label: str, width: int = 28) -> str:
+    """A policy's label cut to fit beside a panel, keeping its end (the folder and file)."""
+    return label if len(label) <= width else "..." + label[-(width - 3):]
