@@ -26,6 +26,7 @@ class PpoSettings:
     n_epochs: int
     clip_range: float
     ent_coef: float
+    target_kl: float | None = None  # SB3's early stop of an update's epochs (None: all epochs)
 
 
 def ppo_settings_at(config: RunConfig, stage_index: int, stage_starts: Sequence[int], step: int) -> PpoSettings:
@@ -36,7 +37,7 @@ def ppo_settings_at(config: RunConfig, stage_index: int, stage_starts: Sequence[
     """
     base = config.ppo
     values = {"n_steps": base.n_steps, "batch_size": base.batch_size, "n_epochs": base.n_epochs,
-              "clip_range": base.clip_range, "ent_coef": base.ent_coef}
+              "clip_range": base.clip_range, "ent_coef": base.ent_coef, "target_kl": base.target_kl}
     rate, rate_set_at = base.learning_rate, 0
     for index, stage in enumerate(config.curriculum.stages[: stage_index + 1]):
         overrides = stage.ppo.as_dict()

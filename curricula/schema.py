@@ -86,6 +86,8 @@ class PpoOverrides:
     batch_size: int | None = setting(None, integer(low=1))
     clip_range: float | None = setting(None, number(low=0, strict_low=True))
     ent_coef: float | None = setting(None, number(low=0))
+    n_epochs: int | None = setting(None, integer(low=1))
+    target_kl: float | None = setting(None, number(low=0, strict_low=True))
 
     def as_dict(self) -> dict[str, float | int]:
         return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}

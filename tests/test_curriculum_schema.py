@@ -106,7 +106,8 @@ def test_good_curriculum_is_parsed_with_defaults_merged(tmp_path):
     ("task: baoding", "task: juggling", "task: 'juggling' is not one of baoding"),
     ("  - name: b", "  - name: a", "stage 2 name: duplicate stage name 'a'"),
     ("    ppo: {learning_rate: 1e-4, n_steps: 64}", "    ppo: {lr: 1e-4}",
-     "stage 2 (b) ppo.lr: unknown key; allowed: learning_rate, n_steps, batch_size, clip_range, ent_coef"),
+     "stage 2 (b) ppo.lr: unknown key; allowed: learning_rate, n_steps, batch_size, clip_range, ent_coef, n_epochs, "
+     "target_kl"),
     ("max_steps: 1000,", "max_steps: 50,", "stage 2 (b) advance.max_steps: 50 is below min_steps 100"),
     ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 1e-4},",
      "stage 2 (b) ppo.learning_rate: a learning-rate decay needs start, end, steps; missing: steps"),
@@ -242,3 +243,17 @@ def test_ppo_warmup_is_read_and_checked(tmp_path):
     overridden = load_run_config(write(tmp_path, base.replace(", warmup: WARMUP", ""), "plain.yaml"),
                                  ("ppo.warmup.steps=300", "ppo.warmup.batch_size=32"))
     assert overridden.ppo.warmup == PpoWarmup(steps=300, batch_size=32)
+
+
+def test_a_stage_changes_epochs_and_target_kl_until_a_later_stage_does(tmp_path):
+    from myo_sds.curricula.schedule import ppo_settings_at
+
+    curriculum = GOOD_CURRICULUM.replace("ppo: {learning_rate: 1e-4, n_steps: 64}",
+                                         "ppo: {learning_rate: 1e-4, n_steps: 64, n_epochs: 5, target_kl: 0.2}")
+    write(tmp_path, curriculum, "cur.yaml")
+    config = load_run_config(write(tmp_path, "curriculum: cur.yaml\nppo: {n_steps: 64, batch_size: 64, n_epochs: 10}\n",
+                                   "run.yaml"))
+    first = ppo_settings_at(config, 0, [0], 10)
+    second = ppo_settings_at(config, 1, [0, 500], 600)
+    assert (first.n_epochs, first.target_kl) == (10, None)
+    assert (second.n_epochs, second.target_kl) == (5, 0.2)

@@ -193,5 +193,6 @@ def apply_ppo_settings(model, settings: PpoSettings) -> None:
     model.ent_coef = settings.ent_coef
     model.batch_size = settings.batch_size
     model.n_epochs = settings.n_epochs
+    model.target_kl = settings.target_kl
     if settings.n_steps != model.n_steps:
         resize_rollout_buffer(model, settings.n_steps)
