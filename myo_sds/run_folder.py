@@ -21,19 +21,21 @@ Every file is replaced in one rename (written under a temporary name first), so 
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import pickle
 import platform
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from myo_sds.curricula.state import CurriculumState
+from myo_sds.episode_log import EPISODE_COLUMNS, EpisodeRecord, append_episodes, read_episodes, truncate_episodes
+
+__all__ = ["EPISODE_COLUMNS", "CheckpointFiles", "EpisodeRecord", "RunFolder", "checkpoint_files", "statistics_beside"]
 
 CONFIG_FILE = "config.yaml"
 CURRICULUM_FILE = "curriculum.yaml"
@@ -45,39 +47,6 @@ FINAL_VECNORMALIZE = "final_vecnormalize.pkl"
 COMMAND_FILE = "command.txt"
 VERSIONS_FILE = "versions.json"
 MODEL_CARD = "README.md"
-EPISODE_COLUMNS = ("step", "wall_s", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
-                   "effort", "direction", "start_phase")
-
-
-@dataclass(frozen=True)
-class EpisodeRecord:
-    """One row of ``episodes.csv``: a training episode and when it ended."""
-
-    step: int
-    wall_s: float  # the run's training wall time when the episode ended
-    stage_index: int
-    stage: str
-    score: float
-    solved_steps: int
-    length: int
-    dropped: bool
-    effort: float
-    direction: str
-    start_phase: float | None  # rad; None in runs begun before it was logged
-
-    def to_row(self) -> tuple:
-        phase = "" if self.start_phase is None else f"{self.start_phase:.4f}"
-        return (self.step, f"{self.wall_s:.2f}", self.stage_index, self.stage, f"{self.score:.6g}", self.solved_steps,
-                self.length, int(self.dropped), f"{self.effort:.6g}", self.direction or "", phase)
-
-    @classmethod
-    def from_row(cls, row: dict[str, str]) -> EpisodeRecord:
-        phase = row.get("start_phase") or ""
-        return cls(int(row["step"]), float(row["wall_s"]), int(row["stage_index"]), row["stage"], float(row["score"]),
-                   int(row["solved_steps"]), int(row["length"]), row["dropped"] == "1", float(row["effort"]),
-                   row["direction"], float(phase) if phase else None)
-
-
 @dataclass(frozen=True)
 class CheckpointFiles:
     """A checkpoint's files. The random state is optional: checkpoints written before it
@@ -130,17 +99,6 @@ def _atomic_save(path: Path, save) -> None:
     tmp = path.with_name(f".tmp_{path.name}")
     save(tmp)
     os.replace(tmp, path)
-
-
-def cpu_model() -> str:
-    """The processor's name as Linux reports it, else the platform's."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def package_versions() -> dict[str, str]:
@@ -215,11 +173,12 @@ class RunFolder:
         """Append this session's command line to ``command.txt``, after a comment line with
         the time, the step it starts from and the machine: a run resumed many times keeps
         how each part of it was trained."""
+        from myo_sds.numerics import cpu_name
         from myo_sds.threads import available_cpus
 
         when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
         with self.command_file.open("a") as file:
-            file.write(f"# {when}, from env step {from_step:,}, {available_cpus()} CPUs ({cpu_model()})\n"
+            file.write(f"# {when}, from env step {from_step:,}, {available_cpus()} CPUs ({cpu_name()})\n"
                        f"{' '.join(sys.argv)}\n")
 
     def looks_like_run(self) -> bool:
@@ -382,49 +341,10 @@ class RunFolder:
     # episodes --------------------------------------------------------------------------
 
     def append_episodes(self, records: Iterable[EpisodeRecord]) -> None:
-        """Add rows to ``episodes.csv``; a run begun before the last columns existed keeps its
-        header, and its rows match it."""
-        path = self.episodes_file
-        new = not path.exists()
-        n_columns = len(EPISODE_COLUMNS) if new else len(self._episode_header())
-        with path.open("a", newline="") as file:
-            writer = csv.writer(file)
-            if new:
-                writer.writerow(EPISODE_COLUMNS)
-            for record in records:
-                writer.writerow(record.to_row()[:n_columns])
+        append_episodes(self.episodes_file, records)
 
     def read_episodes(self) -> list[EpisodeRecord]:
-        if not self.episodes_file.is_file():
-            return []
-        with self.episodes_file.open(newline="") as file:
-            return [EpisodeRecord.from_row(row) for row in csv.DictReader(file)]
+        return read_episodes(self.episodes_file)
 
     def truncate_episodes(self, max_step: int) -> None:
-        """Drop episodes logged after the checkpoint a resumed run restarts from, and a row
-        that a kill cut short."""
-        path = self.episodes_file
-        if not path.exists():
-            return
-        with path.open(newline="") as file:
-            rows = list(csv.reader(file))
-        if not rows:
-            path.unlink()
-            return
-        header = rows[0]
-
-        def kept(row: Sequence[str]) -> bool:
-            try:
-                return len(row) == len(header) and int(row[0]) <= max_step
-            except ValueError:
-                return False
-
-        tmp = path.with_name(f".{path.name}.tmp")
-        with tmp.open("w", newline="") as file:
-            csv.writer(file).writerows([header] + [row for row in rows[1:] if kept(row)])
-        os.replace(tmp, path)
-
-    def _episode_header(self) -> list[str]:
-        with self.episodes_file.open(newline="") as file:
-            return next(csv.reader(file), [])
-
+        truncate_episodes(self.episodes_file, max_step)

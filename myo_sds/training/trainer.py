@@ -95,7 +95,6 @@ class CurriculumTrainer:
                                           update_threads=self.update_threads)
         self.minibatch_hook = model.policy.optimizer.register_step_pre_hook(self.episode_callback.before_optimizer_step)
         self.stage_evaluator = StageEvaluator(config.curriculum.task)
-        self._last_evaluation_step: int | None = None
         self.apply_ppo_settings()
 
     @property
@@ -338,43 +337,14 @@ class CurriculumTrainer:
         logger.dump(model.num_timesteps)
 
     def _evaluate_stage(self) -> None:
-        """The stage's periodic evaluation at this step; a new best policy is kept."""
-        state, model = self.state, self.model
-        score = self.stage_evaluator.score(model, self.venv, self.stage)
-        self._last_evaluation_step = state.num_timesteps
-        if state.record_evaluation(score):
-            self.folder.save_best(model, self.venv, state.num_timesteps)
-        model.logger.record("eval/score", score)
-        model.logger.record("eval/best_score", state.best_evaluated)
-        self.progress_bar.write(f"{stage_label(state.stage_index, self.stage.name)} evaluation at step "
-                                f"{state.num_timesteps}: {score:.3f} (best {state.best_evaluated:.3f} at step "
-                                f"{state.best_evaluated_step})")
+        line = self.stage_evaluator.evaluate(self.model, self.venv, self.stage, self.state, self.folder)
+        self.progress_bar.write(f"{stage_label(self.state.stage_index, self.stage.name)} {line}")
 
     def _hand_off(self) -> int | None:
-        """With ``hand_off: best``, load the stage's best evaluated policy (weights, optimizer,
-        normalization statistics) to start the next stage from; the step it came from, or None
-        when the stage hands on its last policy."""
-        from myo_sds.published import load_statistics
-
-        evaluation, state = self.stage.evaluate, self.state
-        if evaluation is None or evaluation.hand_off != "best":
-            return None
-        if self._last_evaluation_step != state.num_timesteps:
-            self._evaluate_stage()  # the last policy competes too
-        best = state.best_evaluated_step
-        if best is None or best == state.num_timesteps:
-            return None
-        model_file, statistics_file = self.folder.best_files(best)
-        if not (model_file.is_file() and statistics_file.is_file()):
-            self.progress_bar.write(f"the best policy of step {best} is missing ({model_file}); the stage hands on "
-                                    "its last policy")
-            return None
-        self.model.set_parameters(str(model_file), exact_match=True, device=self.model.device)
-        statistics = load_statistics(statistics_file)
-        self.venv.obs_rms, self.venv.ret_rms = statistics.obs_rms, statistics.ret_rms
-        self.progress_bar.write(f"the next stage starts from the best evaluated policy: step {best}, score "
-                                f"{state.best_evaluated:.3f}")
-        return best
+        handed, line = self.stage_evaluator.hand_off(self.model, self.venv, self.stage, self.state, self.folder)
+        if line:
+            self.progress_bar.write(line)
+        return handed
 
     def _transition(self, decision: Decision) -> None:
         state, model, config = self.state, self.model, self.config
