@@ -91,7 +91,7 @@ class LatticeNoise(StateDependentNoiseDistribution):
         return sigma + th.diag_embed(action_variance)
 
     def proba_distribution(self, mean_actions: th.Tensor, log_std: th.Tensor, latent_sde: th.Tensor) -> LatticeNoise:
-        self._latent_sde = latent_sde.detach()
+        self._latent = latent_sde.detach()
         self.distribution = MultivariateNormal(mean_actions, covariance_matrix=self.covariance(log_std, latent_sde),
                                                validate_args=False)
         return self
@@ -108,7 +108,7 @@ class LatticeNoise(StateDependentNoiseDistribution):
         return th.bmm(latent.unsqueeze(1), per_env).squeeze(1)
 
     def sample(self) -> th.Tensor:
-        latent = self._latent_sde
+        latent = self._latent
         latent_noise = self._noise(latent, self.latent_mat, self.latent_matrices)
         action_noise = self._noise(latent, self.action_mat, self.action_matrices)
         return self.distribution.mean + self.alpha * latent_noise @ self.mean_actions_net.weight.T + action_noise

@@ -18,16 +18,32 @@ import numpy as np
 # (module, class) -> private methods called on it or overridden.
 PRIVATE_METHODS: dict[tuple[str, str], tuple[str, ...]] = {
     ("sb3_contrib", "RecurrentPPO"): ("_setup_learn",),
-    ("stable_baselines3.common.vec_env", "DummyVecEnv"): ("_reset_seeds",),
-    # Overridden by myo_sds.policy.SequenceLstmPolicy (the whole-sequence LSTM pass, the bounded mean).
+    # Called by myo_sds.vec_env.ThreadVecEnv, which steps DummyVecEnv's envs on threads.
+    ("stable_baselines3.common.vec_env", "DummyVecEnv"): ("_reset_seeds", "_save_obs", "_obs_from_buf"),
+    # Overridden by myo_sds.policy.SequenceLstmPolicy (the whole-sequence LSTM pass, the bounded mean);
+    # _build is called again by LatticeLstmPolicy once its distribution replaces the Gaussian.
     ("sb3_contrib.common.recurrent.policies", "RecurrentActorCriticPolicy"): (
-        "_process_sequence", "_get_action_dist_from_latent", "_get_constructor_parameters"),
+        "_process_sequence", "_get_action_dist_from_latent", "_get_constructor_parameters", "_build"),
+    # The hooks SB3 documents for a callback to override (myo_sds.training.callbacks, rollout_worker).
+    ("stable_baselines3.common.callbacks", "BaseCallback"): ("_on_step", "_on_rollout_start", "_on_rollout_end"),
 }
-# (module, class) -> private attributes set on its instances.
+# (module, class) -> private attributes set or read on its instances.
 PRIVATE_ATTRIBUTES: dict[tuple[str, str], tuple[str, ...]] = {
-    ("sb3_contrib", "RecurrentPPO"): ("_last_obs", "_last_episode_starts"),
+    # _last_lstm_states and _last_original_obs: left out of a gym-era archive's load (myo_sds.published).
+    ("sb3_contrib", "RecurrentPPO"): ("_last_obs", "_last_episode_starts", "_n_updates", "_last_lstm_states",
+                                      "_last_original_obs"),
     ("stable_baselines3.common.logger", "TensorBoardOutputFormat"): ("_is_closed",),
 }
+
+
+def declared_private_names() -> set[str]:
+    """Every private SB3 member named above: the only ones code outside this module may use."""
+    return {name for names in (*PRIVATE_METHODS.values(), *PRIVATE_ATTRIBUTES.values()) for name in names}
+
+
+def updates_done(model) -> int:
+    """How many gradient epochs the model has run (SB3 counts an early-stopped one too)."""
+    return model._n_updates
 
 
 def start_training(model, total_steps: int, callback) -> Any:

@@ -35,7 +35,7 @@ from myo_sds.curricula.schema import (
 from myo_sds.curricula.state import CurriculumState, RunStatus
 from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.run_folder import EpisodeRecord, RunFolder
-from myo_sds.sb3_internals import set_last_observation, start_training, tensorboard_output
+from myo_sds.sb3_internals import set_last_observation, start_training, tensorboard_output, updates_done
 from myo_sds.threads import UpdateThreads, available_cpus
 from myo_sds.training.callbacks import EpisodeCollector, UpdateInterrupted
 from myo_sds.training.factory import (
@@ -270,13 +270,13 @@ class CurriculumTrainer:
         complete = self.rollouts.collect(model, episode_callback)
         updated_at = time.perf_counter()
         if complete:
-            epochs_before = model._n_updates
+            epochs_before = updates_done(model)
             try:
                 model.train()
             except UpdateInterrupted:
                 pass  # stopped between minibatches: weights and optimizer are consistent
             # SB3 counts an update's epochs, the one target_kl cut short included.
-            model.logger.record("train/epochs_run", model._n_updates - epochs_before)
+            model.logger.record("train/epochs_run", updates_done(model) - epochs_before)
         finished_at = time.perf_counter()
         self.state.wall_s += finished_at - self.iteration_started_at
         self.timings.append(RolloutTiming(model.num_timesteps - steps_before, finished_at - self.iteration_started_at,
