@@ -87,7 +87,10 @@ class LatticeNoise(StateDependentNoiseDistribution):
         # epsilon, as gSDE adds it: a latent of zeros (a dead ReLU layer) gives no noise at all
         action_variance = squared @ action_std**2 + self.std_reg**2 + self.epsilon  # batch x A
         weight = self.mean_actions_net.weight  # A x d
-        sigma = self.alpha**2 * (weight * latent_variance[:, None, :]) @ weight.T
+        if self.full_std:
+            sigma = self.alpha**2 * (weight * latent_variance[:, None, :]) @ weight.T
+        else:  # every latent feature's noise has the same variance: Sigma = alpha^2 v W W^T + diag(u)
+            sigma = self.alpha**2 * latent_variance[:, :1, None] * (weight @ weight.T)
         return sigma + th.diag_embed(action_variance)
 
     def proba_distribution(self, mean_actions: th.Tensor, log_std: th.Tensor, latent_sde: th.Tensor) -> LatticeNoise:

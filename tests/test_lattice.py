@@ -129,3 +129,17 @@ def test_a_lattice_policy_trains_resumes_and_evaluates(tmp_path):
         if name != "log_std":
             assert th.equal(value, source[name]), name
     started.close()
+
+
+def test_the_shared_latent_variance_shortcut_computes_the_general_covariance():
+    th.manual_seed(1)
+    shared = LatticeNoise(5, full_std=False, alpha=0.7)
+    shared.proba_distribution_net(latent_dim=8, log_std_init=-0.5)
+    log_std = th.randn(8, 2) * 0.3
+    x = th.randn(6, 8)
+    general = LatticeNoise(5, full_std=True, alpha=0.7)
+    general.proba_distribution_net(latent_dim=8)
+    general.mean_actions_net = shared.mean_actions_net
+    # The per-feature stds spelled out as a full matrix: each row's two values repeated.
+    full = th.cat([log_std[:, :1].expand(8, 8), log_std[:, 1:].expand(8, 5)], dim=1)
+    assert th.allclose(shared.covariance(log_std, x), general.covariance(full, x), atol=1e-6)
