@@ -12,6 +12,10 @@ times a ball or die falling freely); ``bare_mj_step_same_resets`` is the stricte
 
 from __future__ import annotations
 
+from myo_sds import set_process_environment
+
+set_process_environment()  # before NumPy, torch and MuJoCo load: pinned kernels, short OpenMP spins
+
 import argparse
 import json
 import time

@@ -28,6 +28,10 @@ is already done is only read. Delete a run folder to start it afresh.
 
 from __future__ import annotations
 
+from myo_sds import set_process_environment
+
+set_process_environment()  # before NumPy, torch and MuJoCo load: pinned kernels, short OpenMP spins
+
 import argparse
 import json
 import sys

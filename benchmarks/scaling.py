@@ -14,6 +14,10 @@ rate r (env steps/s on one CPU), the expected throughput with W worker CPUs is
 
 from __future__ import annotations
 
+from myo_sds import set_process_environment
+
+set_process_environment()  # before NumPy, torch and MuJoCo load: pinned kernels, short OpenMP spins
+
 import argparse
 import json
 import sys

@@ -17,6 +17,10 @@ followed the other processes (two torch threads, libgomp's default spin count).
 
 from __future__ import annotations
 
+from myo_sds import set_process_environment
+
+set_process_environment()  # before NumPy, torch and MuJoCo load: pinned kernels, short OpenMP spins
+
 import argparse
 import json
 import os

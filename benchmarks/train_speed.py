@@ -18,6 +18,10 @@ stepping, policy inference (rest of the rollout) and the PPO update.
 
 from __future__ import annotations
 
+from myo_sds import set_process_environment
+
+set_process_environment()  # before NumPy, torch and MuJoCo load: pinned kernels, short OpenMP spins
+
 import argparse
 import json
 import multiprocessing

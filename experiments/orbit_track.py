@@ -11,6 +11,10 @@ so that a policy which stops turning (e.g. a finger at its joint limit) shows wh
 
 from __future__ import annotations
 
+from myo_sds import set_process_environment
+
+set_process_environment()  # before NumPy, torch and MuJoCo load: pinned kernels, short OpenMP spins
+
 import argparse
 import math
 

@@ -24,6 +24,10 @@ Timing-free; takes ~2-4 min for 80 episodes per physics.
 
 from __future__ import annotations
 
+from myo_sds import set_process_environment
+
+set_process_environment()  # before NumPy, torch and MuJoCo load: pinned kernels, short OpenMP spins
+
 import argparse
 import contextlib
 import ctypes

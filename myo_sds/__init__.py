@@ -17,17 +17,31 @@ imported as ``myo_sds.envs`` and ``myo_sds.curricula`` (a top-level ``envs`` wou
 other projects' in site-packages).
 """
 
+import os as _os
 from pathlib import Path as _Path
-
-from myo_sds.numerics import pin_kernels as _pin_kernels
-from myo_sds.threads import limit_openmp_spinning as _limit_openmp_spinning
 
 _PACKAGE = _Path(__file__).resolve().parent
 if not (_PACKAGE / "envs").is_dir():  # a source checkout: the subpackages are at the top
     __path__.append(str(_PACKAGE.parent))  # noqa: F821  (the package's own search path)
 
-_limit_openmp_spinning()  # before anything imports torch
-_pin_kernels()  # the same results on every AVX2 CPU (myo_sds/numerics.py)
+
+def process_environment() -> dict[str, str]:
+    """The environment variables a process that trains or evaluates sets before NumPy, torch
+    and MuJoCo load: their AVX2 kernels (the same results on every AVX2 CPU,
+    ``myo_sds/numerics.py``) and a short OpenMP spin (``myo_sds/threads.py``). A variable the
+    user set is left as it is."""
+    from myo_sds.numerics import KERNEL_PINS
+    from myo_sds.threads import OPENMP_SPIN
+
+    return {**KERNEL_PINS, **OPENMP_SPIN}
+
+
+def set_process_environment() -> None:
+    """Set :func:`process_environment` (a user's own setting wins). The command lines and the
+    Ray workers do it first thing; a script that imports the package does it before importing
+    NumPy or torch to replay this project's numbers bit for bit."""
+    for name, value in process_environment().items():
+        _os.environ.setdefault(name, value)
 
 
 def bundled_path(kind: str, name: str) -> _Path | None:

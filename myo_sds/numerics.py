@@ -8,8 +8,8 @@ start (``experiments/RESULTS.md``, "Scores that depend on the CPU"): the shipped
 solved 139 of 200 steps on an Intel Xeon and 61 on an AMD EPYC with the same software;
 setting MKL's reproducibility branch alone moved the EPYC's episode to 123.
 
-:func:`pin_kernels` asks every library for its AVX2 path before any of them loads (an
-environment variable set by the user wins), so that evaluations and runs repeat across
+:data:`KERNEL_PINS` ask every library for its AVX2 path; the command lines set them before any
+of the libraries loads (``myo_sds.set_process_environment``; a variable set by the user wins), so that evaluations and runs repeat across
 machines. :func:`fingerprint` hashes a few computations through those kernels (an LSTM,
 transcendental functions, MuJoCo steps of the hand): two machines with the same fingerprint
 replay each other's episodes bit for bit. Evaluations record it.
@@ -28,12 +28,6 @@ KERNEL_PINS: dict[str, str] = {
     "ATEN_CPU_CAPABILITY": "avx2",  # torch's own vectorized kernels
     "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR",  # NumPy's AVX-512 loops
 }
-
-
-def pin_kernels() -> None:
-    """Ask MKL, torch and NumPy for their AVX2 kernels (no effect once they have loaded)."""
-    for name, value in KERNEL_PINS.items():
-        os.environ.setdefault(name, value)
 
 
 def cpu_name() -> str:

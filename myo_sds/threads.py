@@ -70,9 +70,9 @@ def available_cpus() -> int:
     return max(1, count)
 
 
-def limit_openmp_spinning() -> None:
-    """Lower libgomp's spin count unless the user set it; must run before torch is imported."""
-    os.environ.setdefault("GOMP_SPINCOUNT", "10000")
+# libgomp's spin count, lowered: threads spin-waiting for a core another process holds make an
+# update 10-100x slower. Set before torch loads (myo_sds.set_process_environment).
+OPENMP_SPIN = {"GOMP_SPINCOUNT": "10000"}
 
 
 def _clock_ticks_per_second() -> float:

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from pathlib import Path
+from myo_sds import set_process_environment
 
-import pytest
-from tiny_run import write_config
+set_process_environment()  # as the command lines do, before NumPy, torch and MuJoCo load
 
-from myo_sds.curricula.state import CurriculumState
-from myo_sds.training import CurriculumTrainer
+from dataclasses import dataclass  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+from tiny_run import write_config  # noqa: E402
+
+from myo_sds.curricula.state import CurriculumState  # noqa: E402
+from myo_sds.training import CurriculumTrainer  # noqa: E402
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,6 @@
-"""Importing myo_sds pins MKL, torch and NumPy to their AVX2 kernels before they load, and the
-numerics fingerprint sees the kernel a policy's single-row products go through."""
+"""The command lines pin MKL, torch and NumPy to their AVX2 kernels before they load (importing
+the library changes no environment), and the numerics fingerprint sees the kernel a policy's
+single-row products go through."""
 
 from __future__ import annotations
 
@@ -19,18 +20,24 @@ def _run(code: str, **env: str) -> str:
 
 
 @pytest.mark.skipif(os.uname().machine != "x86_64", reason="the pins name x86-64 kernels")
-def test_importing_the_package_pins_the_kernels_before_torch_loads():
-    out = _run("import myo_sds, os, torch; print(os.environ['MKL_CBWR'], torch.backends.cpu.get_cpu_capability())")
+def test_the_command_lines_pin_the_kernels_before_torch_loads():
+    out = _run("import myo_sds.cli, os, torch; print(os.environ['MKL_CBWR'], torch.backends.cpu.get_cpu_capability())")
     assert out.split() == ["AVX2", "AVX2"]
+    assert _run("import myo_sds.cli, os; print(os.environ['GOMP_SPINCOUNT'])") == "10000"
+
+
+def test_importing_the_library_changes_no_environment():
+    code = "import os; before = dict(os.environ); import myo_sds.training, myo_sds.evaluation; print(dict(os.environ) == before)"
+    assert _run(code) == "True"
 
 
 def test_a_user_setting_wins_over_the_pin():
-    assert _run("import myo_sds, os; print(os.environ['MKL_CBWR'])", MKL_CBWR="COMPATIBLE") == "COMPATIBLE"
+    assert _run("import myo_sds.cli, os; print(os.environ['MKL_CBWR'])", MKL_CBWR="COMPATIBLE") == "COMPATIBLE"
 
 
 @pytest.mark.skipif(os.uname().machine != "x86_64", reason="the pins name x86-64 kernels")
 def test_the_fingerprint_repeats_and_follows_the_matrix_kernel():
-    code = "import myo_sds.numerics as n; print(n.fingerprint())"
+    code = "import myo_sds.cli; import myo_sds.numerics as n; print(n.fingerprint())"
     pinned = _run(code)
     assert pinned == _run(code) == _run(code, MKL_CBWR="AVX2")
     assert len(pinned) == 12 and int(pinned, 16) >= 0

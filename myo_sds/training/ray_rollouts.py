@@ -81,7 +81,11 @@ class RayRollouts:
         self.config, self.venv = config, venv
         self.k = config.rollout.envs_per_worker
         self.restarts = 0
-        remote = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=0)(RolloutWorker)
+        # A worker's process starts before it imports anything of ours: its environment comes with it.
+        from myo_sds import process_environment
+
+        remote = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=0,
+                            runtime_env={"env_vars": {**process_environment(), **_user_settings()}})(RolloutWorker)
         self.workers = [remote.remote(config, index, distribution, settings, torch_rng if index == 0 else None)
                         for index in range(config.rollout.workers)]
         self.distribution, self.settings = distribution, settings
@@ -251,3 +255,12 @@ class RayRollouts:
 
 
 __all__ = ["Moments", "RayRollouts", "WorkerLost", "connect"]
+
+
+def _user_settings() -> dict[str, str]:
+    """The process-environment variables this process has (a user's setting, or ours), for the workers."""
+    import os
+
+    from myo_sds import process_environment
+
+    return {name: os.environ[name] for name in process_environment() if name in os.environ}
