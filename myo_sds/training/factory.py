@@ -144,16 +144,23 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
         else:
             model.set_parameters(str(model_file), exact_match=True, device=model.device)
     except (RuntimeError, ValueError, KeyError) as error:
-        first_line = str(error).strip().splitlines()[0]
         raise ConfigError(f"--init-from {model_file}: its network does not fit this config's `policy` "
                           f"settings (lstm_hidden_size, enable_critic_lstm, net_arch, fast_lstm_update): "
-                          f"{first_line}") from None
+                          f"{_first_difference(error)}") from None
     if statistics.is_file():
         trained = load_statistics(statistics)
         if trained.obs_rms.mean.shape != venv.obs_rms.mean.shape:
             raise ConfigError(f"--init-from {statistics}: observations of shape {trained.obs_rms.mean.shape}, "
                               f"this task's are {venv.obs_rms.mean.shape}")
         venv.obs_rms, venv.ret_rms = trained.obs_rms, trained.ret_rms
+
+
+def _first_difference(error: Exception) -> str:
+    """The first concrete line of torch's state-dict error (its first line is only a heading:
+    "Error(s) in loading state_dict for ...:"), e.g. a size mismatch with both shapes."""
+    lines = [line.strip() for line in str(error).strip().splitlines() if line.strip()]
+    concrete = [line for line in lines if not line.endswith(":")]
+    return (concrete or lines or [type(error).__name__])[0].rstrip(".")
 
 
 def _gaussian_into_lattice(model, model_file: Path) -> bool:
