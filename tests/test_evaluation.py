@@ -359,3 +359,19 @@ def test_cli_plots_and_video_of_folders_without_an_episode_log(tmp_path, capsys)
     import imageio.v3 as iio
 
     assert iio.imread(out / "v.mp4").shape == (length + 80, 480, 640, 3)
+
+
+def test_the_model_card_gives_the_scores_its_evaluation_json_records(tiny_run, tmp_path):
+    from myo_sds.evaluation.model_card import model_card
+
+    model = tmp_path / "model"
+    shutil.copytree(tiny_run.path, model, ignore=shutil.ignore_patterns("checkpoints", "tb"))
+    ref = ev.resolve_checkpoint(model)
+    reports = [ev.evaluate(ref, ev.choose_env(ref, "p1_2022", start_noise=noise), episodes=2) for noise in (0.0, 0.02)]
+    (model / "evaluation.json").write_text(json.dumps({"numerics": {"fingerprint": "abc", "cpu": "test"},
+                                                       "reports": [r.summary() for r in reports]}))
+    card = model_card(model, tiny_run.path)
+    assert "## Scores" in card and "numerics `abc` (test)" in card
+    for report in reports:
+        s = report.summary()
+        assert f"| `p1_2022` | {s['start_noise']:g} | 2 | {s['score']:.3f} | - |" in card

@@ -40,6 +40,36 @@ def _final_task(folder: RunFolder) -> str:
                  if replace(knobs.parse(name), reward_weights=last.reward_weights) == last), "p1")
 
 
+def scores_table(evaluation: dict) -> list[str]:
+    """Markdown rows of an ``evaluation.json``: per env and start noise, the score on our env and
+    on MyoSuite's, the 95% interval and the drop rate (ours)."""
+    rows: dict[tuple[str, float], dict[bool, dict]] = {}
+    for report in evaluation["reports"]:
+        rows.setdefault((report["env"], report.get("start_noise", 0.0)), {})[report["official_env"]] = report
+    lines = ["| env | start noise (rad) | episodes | ours | MyoSuite's | 95% interval | dropped |",
+             "|---|---|---|---|---|---|---|"]
+    for (env, noise), pair in rows.items():
+        ours, theirs = pair.get(False), pair.get(True)
+        main = ours or theirs
+        low, high = main["score_ci95"]
+        lines.append(f"| `{env}` | {noise:g} | {main['episodes']} | {ours['score']:.3f} | " if ours else
+                     f"| `{env}` | {noise:g} | {main['episodes']} | - | ")
+        lines[-1] += (f"{theirs['score']:.3f} | " if theirs else "- | ") + f"[{low:.3f}, {high:.3f}] | " \
+                     f"{main['drop_rate']:.0%} |"
+    return lines
+
+
+def _scores(folder: RunFolder) -> list[str]:
+    path = folder.path / "evaluation.json"
+    if not path.is_file():
+        return []
+    evaluation = json.loads(path.read_text())
+    numerics = evaluation.get("numerics", {})
+    return ["", "## Scores", "", *scores_table(evaluation), "",
+            f"Deterministic episodes (`evaluation.json`), numerics `{numerics.get('fingerprint', '?')}` "
+            f"({numerics.get('cpu', '?')}): start noise moves every hand joint by up to that much at reset."]
+
+
 def model_card(model_dir: Path, source_run: Path) -> str:
     """The card's Markdown for the exported folder ``model_dir`` of the run ``source_run``."""
     folder = RunFolder(model_dir)
@@ -52,6 +82,7 @@ def model_card(model_dir: Path, source_run: Path) -> str:
              f"({summary.wall_s / 3600:.2f} h of training, {where}), with its optimizer state, its "
              "normalization statistics and its curriculum state.",
              *_started_from(folder),
+             *_scores(folder),
              "",
              "## Stages",
              "",
