@@ -8,7 +8,8 @@ Random draws at reset, in this order (the official order, so the presets give th
 instance as the official env for the same seed):
   1. goal position offset (3), 2. goal orientation (3 Euler angles),
   3. friction of each of the die's 15 geoms (15 x 3), 4. die mass, 5. die size change;
-  6. hand joint noise (23), only when ``hand_noise > 0``.
+  6. hand joint noise (23), only when ``hand_noise > 0``;
+  7. with ``recorded_start`` set: whether to start from a recorded state, and which one.
 """
 
 from __future__ import annotations
@@ -102,6 +103,11 @@ class DieEnv(MuscleHandEnv):
             hand = self.data.qpos[:N_HAND_JOINTS]
             hand += rng.uniform(-noise, noise, N_HAND_JOINTS)
             np.clip(hand, self._joint_low, self._joint_high, out=hand)
+
+    def _task_for_recorded_state(self, task: DieTask, rng: np.random.Generator) -> DieTask:
+        """The goal stays the one drawn for this episode: the die starts where an earlier episode
+        had it, and must be turned from there (PKU-MARL's starts for this task in 2022)."""
+        return task
 
     def _apply_task(self, task: DieTask) -> None:
         """Goal pose and die physics into the model, as the official env edits it."""

@@ -9,7 +9,20 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any, ClassVar
 
-from myo_sds.envs.knobs import Range, TaskKnobs, check_complete, knob, parse_range, ranged, scalar, to_float, weights
+from myo_sds.envs.knobs import (
+    Range,
+    RecordedStart,
+    TaskKnobs,
+    check_complete,
+    knob,
+    optional,
+    parse_range,
+    parse_recorded_start,
+    ranged,
+    scalar,
+    to_float,
+    weights,
+)
 from myo_sds.envs.registry import TaskSpec, solved_on_more_than
 
 SUCCESS_STEPS = 5  # an episode succeeds when solved on more steps than this
@@ -77,6 +90,12 @@ class DieKnobs(TaskKnobs):
     friction_change: tuple[float, float, float] = knob(
         (0.0, 0.0, 0.0), parse=_friction_change, help="[slide, torsion, roll]: friction = nominal +- U(change) per geom")
     hand_noise: float = knob(0.0, parse=scalar(minimum=0.0), help="rad, uniform +- noise on the 23 hand joints at reset")
+    recorded_start: RecordedStart | None = knob(
+        None, parse=optional(parse_recorded_start),
+        help="null, or {probability, capacity: 1000, every: 4, solved_only: true}: a share of resets starts from a "
+             "whole state (hand, die, velocities, activations) recorded in this env's own earlier episodes, with the "
+             "goal drawn as the stage's knobs say (solved_only: false records unsolved steps too); the bank is per "
+             "env, bounded, and refills after --resume")
     position_threshold: float = knob(0.025, parse=scalar(positive=True),
                                      help="m, solved when the die is closer than this to the goal ...")
     rotation_threshold: float = knob(0.262, parse=scalar(positive=True),

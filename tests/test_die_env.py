@@ -167,3 +167,26 @@ def test_parity_full_episodes_and_pinned_state(preset):
     o_obs = u._obs_dict_to_vec(u._get_obs_dict(u._accessor)).astype(np.float32)
     np.testing.assert_allclose(obs, o_obs, atol=1e-6)
     compare_episode(ours, official, action_seed=80)
+
+
+def test_recorded_starts_restore_the_hand_and_die_of_earlier_episodes_with_a_goal_drawn_as_usual():
+    recorded = {"probability": 1.0, "every": 1, "solved_only": False, "capacity": 50}
+    env = DieEnv("p1", recorded_start=recorded)
+    reference = DieEnv("p1")  # the same knobs without recorded starts: the goals drawn at each reset
+    env.reset(seed=3)
+    seen = []
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        _, _, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 39).astype(np.float32))
+        if not terminated:
+            seen.append((env.data.qpos.copy(), env.data.qvel.copy(), env.data.act.copy()))
+        if terminated or truncated:
+            break
+    assert env.state_bank.size == min(50, len(seen)) > 0
+    _, info = env.reset(seed=11)
+    assert env.recorded_start
+    assert any(np.array_equal(env.data.qpos, q) and np.array_equal(env.data.qvel, v) and np.array_equal(env.data.act, a)
+               for q, v, a in seen)
+    # The goal is drawn first, as without recorded starts (draw order: envs/die.py).
+    _, expected = reference.reset(seed=11)
+    assert info["task"] == expected["task"]
