@@ -24,6 +24,8 @@ PRIVATE_METHODS: dict[tuple[str, str], tuple[str, ...]] = {
     # _build is called again by LatticeLstmPolicy once its distribution replaces the Gaussian.
     ("sb3_contrib.common.recurrent.policies", "RecurrentActorCriticPolicy"): (
         "_process_sequence", "_get_action_dist_from_latent", "_get_constructor_parameters", "_build"),
+    # Overridden by myo_sds.rollout_buffer.PaddedRolloutBuffer (the same minibatches, padded in one gather).
+    ("sb3_contrib.common.recurrent.buffers", "RecurrentRolloutBuffer"): ("_get_samples",),
     # The hooks SB3 documents for a callback to override (myo_sds.training.callbacks, rollout_worker).
     ("stable_baselines3.common.callbacks", "BaseCallback"): ("_on_step", "_on_rollout_start", "_on_rollout_end"),
 }
@@ -87,11 +89,12 @@ def drop_queued_seeds(vec_env) -> None:
     vec_env._reset_seeds()
 
 
-def resize_rollout_buffer(model, n_steps: int) -> None:
-    """A new rollout buffer of ``n_steps`` per env (RecurrentPPO sizes it once, at set-up)."""
+def resize_rollout_buffer(model, n_steps: int, buffer_class: type | None = None) -> None:
+    """A new rollout buffer of ``n_steps`` per env (RecurrentPPO sizes it once, at set-up), of
+    ``buffer_class`` (default: the model's current buffer's class)."""
     model.n_steps = n_steps
     buffer, lstm = model.rollout_buffer, model.policy.lstm_actor
-    model.rollout_buffer = type(buffer)(
+    model.rollout_buffer = (buffer_class or type(buffer))(
         n_steps, model.observation_space, model.action_space,
         (n_steps, lstm.num_layers, model.n_envs, lstm.hidden_size), model.device,
         gamma=model.gamma, gae_lambda=model.gae_lambda, n_envs=model.n_envs)

@@ -1,5 +1,6 @@
 """The speed-ups change nothing but speed: the whole-sequence LSTM update computes what
-sb3-contrib's step-by-step loop computes, and ThreadVecEnv behaves like DummyVecEnv."""
+sb3-contrib's step-by-step loop computes, the padded rollout buffer gives sb3-contrib's
+minibatches value for value, and ThreadVecEnv behaves like DummyVecEnv."""
 
 from __future__ import annotations
 
@@ -157,3 +158,42 @@ def test_thread_vec_env_equals_dummy_vec_env():
                 assert a["episode_result"] == b["episode_result"]
     assert ends >= 5  # auto-reset was exercised
     threaded.close()
+
+
+def _filled(buffer_class, episode_start_rate: float):
+    from gymnasium import spaces
+    from sb3_contrib.common.recurrent.type_aliases import RNNStates
+
+    rng = np.random.default_rng(0)
+    buffer = buffer_class(32, spaces.Box(-np.inf, np.inf, (5,), np.float32), spaces.Box(-1, 1, (3,), np.float32),
+                          (32, 1, 4, 6), n_envs=4)
+    for _ in range(32):
+        hidden = th.tensor(rng.normal(size=(1, 4, 6)), dtype=th.float32)
+        buffer.add(rng.normal(size=(4, 5)).astype(np.float32), rng.normal(size=(4, 3)).astype(np.float32),
+                   rng.normal(size=4), (rng.uniform(size=4) < episode_start_rate).astype(np.float32),
+                   th.tensor(rng.normal(size=4)), th.tensor(rng.normal(size=4)),
+                   lstm_states=RNNStates((hidden, hidden + 1), (hidden + 2, hidden + 3)))
+    buffer.compute_returns_and_advantage(th.tensor(rng.normal(size=4)), np.zeros(4))
+    return buffer
+
+
+@pytest.mark.parametrize("batch_size", [7, 32, 128])
+@pytest.mark.parametrize("episode_start_rate", [0.0, 0.1, 0.5])
+def test_the_padded_buffer_gives_sb3_contribs_minibatches(batch_size, episode_start_rate):
+    from sb3_contrib.common.recurrent.buffers import RecurrentRolloutBuffer
+
+    from myo_sds.rollout_buffer import PaddedRolloutBuffer
+
+    stock, padded = _filled(RecurrentRolloutBuffer, episode_start_rate), _filled(PaddedRolloutBuffer, episode_start_rate)
+    np.random.seed(3)
+    expected = list(stock.get(batch_size))
+    np.random.seed(3)
+    got = list(padded.get(batch_size))
+    assert len(got) == len(expected) == -(-128 // batch_size)
+    for mine, theirs in zip(got, expected):
+        for name in theirs._fields:
+            if name == "lstm_states":
+                for a, b in zip(mine.lstm_states, theirs.lstm_states):
+                    assert all(th.equal(x, y) for x, y in zip(a, b))
+            else:
+                assert th.equal(getattr(mine, name), getattr(theirs, name)), name

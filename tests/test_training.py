@@ -37,6 +37,9 @@ def test_two_stage_run_advances_and_records_everything(tiny_run):
     # Stage 2's PPO overrides took effect, including a rebuilt rollout buffer.
     model = trainer.model
     assert model.n_steps == 32 and model.rollout_buffer.buffer_size == 32
+    from myo_sds.rollout_buffer import PaddedRolloutBuffer
+
+    assert isinstance(model.rollout_buffer, PaddedRolloutBuffer)  # the faster padding, kept through the resize
     assert model.batch_size == 64 and model.learning_rate == 1e-4
     # Every worker env got the stage-2 knobs, in place.
     assert trainer.venv.get_attr("knobs")[0].direction == "ccw"

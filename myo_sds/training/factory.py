@@ -188,6 +188,17 @@ def _load_mean_network(model, model_file: Path) -> None:
         raise RuntimeError(f"networks differ: missing {missing}, unexpected {unexpected}")
 
 
+def use_padded_buffer(model) -> None:
+    """The model's rollout buffer as :class:`~myo_sds.rollout_buffer.PaddedRolloutBuffer` (the
+    same minibatches, padded faster); with ``fast_lstm_update: false`` sb3-contrib's own stays,
+    to reproduce the reference setup's speed."""
+    from myo_sds.policy import SequenceLstmPolicy
+    from myo_sds.rollout_buffer import PaddedRolloutBuffer
+
+    if isinstance(model.policy, SequenceLstmPolicy) and not isinstance(model.rollout_buffer, PaddedRolloutBuffer):
+        resize_rollout_buffer(model, model.n_steps, PaddedRolloutBuffer)
+
+
 def apply_ppo_settings(model, settings: PpoSettings) -> None:
     """Set learning rate, clip range, entropy coefficient, batch size, epochs and rollout length."""
     from stable_baselines3.common.utils import ConstantSchedule
@@ -203,3 +214,4 @@ def apply_ppo_settings(model, settings: PpoSettings) -> None:
     model.target_kl = settings.target_kl
     if settings.n_steps != model.n_steps:
         resize_rollout_buffer(model, settings.n_steps)
+    use_padded_buffer(model)
