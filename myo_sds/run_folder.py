@@ -160,6 +160,28 @@ class RunFolder:
                 continue
         raise RuntimeError(f"could not create a run folder next to {base}")
 
+    @classmethod
+    def claim(cls, path: Path, overwrite: bool = False) -> RunFolder:
+        """``path`` as a new run's folder: created, or emptied with ``overwrite``; a folder that
+        holds anything is otherwise refused (a ``ConfigError`` saying what to do instead)."""
+        import shutil
+
+        from myo_sds.curricula.yaml_reader import ConfigError
+
+        if path.exists() and any(path.iterdir()):
+            if not overwrite:
+                raise ConfigError(f"{path}: run folder exists and is not empty; use --resume "
+                                  "to continue it or --overwrite to replace it")
+            shutil.rmtree(path)
+        path.mkdir(parents=True, exist_ok=True)
+        return cls(path)
+
+    def remove(self) -> None:
+        """Delete the folder and everything in it (a run that failed before training)."""
+        import shutil
+
+        shutil.rmtree(self.path)
+
     def write_provenance(self, config_yaml: str, curriculum_yaml: str) -> None:
         """The resolved config (pointing at the folder's own copy of the curriculum), that
         copy, the command line and the package versions."""

@@ -10,7 +10,6 @@ to the advancement rule (``curricula.advancement``). A stage change reaches ever
 from __future__ import annotations
 
 import math
-import shutil
 import signal
 import time
 from dataclasses import dataclass
@@ -125,14 +124,7 @@ class CurriculumTrainer:
         if run_dir is None:
             folder = RunFolder.create(config.output_dir, config_path.stem, config.seed)
         else:
-            run_dir = Path(run_dir)
-            if run_dir.exists() and any(run_dir.iterdir()):
-                if not overwrite:
-                    raise ConfigError(f"{run_dir}: run folder exists and is not empty; use --resume "
-                                      "to continue it or --overwrite to replace it")
-                shutil.rmtree(run_dir)
-            run_dir.mkdir(parents=True, exist_ok=True)
-            folder = RunFolder(run_dir)
+            folder = RunFolder.claim(Path(run_dir), overwrite)
         # The run folder is self-contained: its config points at its own copy of the curriculum.
         resolved = {**config.source, "curriculum": folder.curriculum_file.name, "seed": config.seed}
         folder.write_provenance(yaml.safe_dump(resolved, sort_keys=False), config.curriculum_path.read_text())
@@ -146,7 +138,7 @@ class CurriculumTrainer:
                 initialize_from(model, venv, *trained)
             except ConfigError:
                 venv.close()
-                shutil.rmtree(folder.path)  # nothing trained yet: no half-made run folder stays
+                folder.remove()  # nothing trained yet: no half-made run folder stays
                 raise
         model.set_logger(configure(str(folder.tensorboard_dir), ["tensorboard"]))
         return cls(config, folder, state, model, _rollouts(config, model, stage, settings), progress)
