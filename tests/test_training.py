@@ -351,3 +351,19 @@ def test_a_stage_evaluation_is_checked_when_read(tmp_path, capsys):
         with pytest.raises(ConfigError, match=message):
             CurriculumTrainer.start(write_config(tmp_path, total=1024, curriculum=curriculum),
                                     run_dir=tmp_path / "bad", overwrite=True, progress=False)
+
+
+def test_a_run_folder_that_holds_anything_is_refused_unless_overwritten(tmp_path):
+    from myo_sds.run_folder import RunFolder
+
+    taken = tmp_path / "taken"
+    taken.mkdir()
+    (taken / "notes.txt").write_text("mine")
+    with pytest.raises(ConfigError, match="run folder exists and is not empty; use --resume"):
+        RunFolder.claim(taken)
+    assert (taken / "notes.txt").read_text() == "mine"
+    folder = RunFolder.claim(taken, overwrite=True)
+    assert folder.path == taken and not any(taken.iterdir())
+    folder.remove()
+    assert not taken.exists()
+    assert RunFolder.claim(tmp_path / "new" / "run").path.is_dir()
