@@ -15,6 +15,43 @@ class UpdateInterrupted(Exception):
     """Raised between two minibatches of a PPO update when a stop was requested."""
 
 
+class EpisodeTally:
+    """What each env step of a rollout says of its episodes, for the trainer's callback and a
+    Ray worker's alike: the reward terms summed over steps and envs, and each finished episode
+    with the stage its env began it in (an episode begun before a stage change is not the new
+    stage's)."""
+
+    def __init__(self, n_envs: int, terms: tuple[str, ...], stage_index: int = 0) -> None:
+        self.terms = tuple(t for t in terms if t != "done")
+        self.episode_stage = [stage_index] * n_envs  # the stage each env's current episode began in
+        self.term_sums: dict[str, float] = {}
+        self.term_count = 0
+
+    def observe(self, infos, dones, stage_index: int) -> list[tuple[int, EpisodeResult]]:
+        """One step of every env; returns ``(stage begun in, result)`` of each episode it ended."""
+        finished = []
+        for rank, (info, done) in enumerate(zip(infos, dones)):
+            for key in self.terms:
+                self.term_sums[key] = self.term_sums.get(key, 0.0) + info.get(key, 0.0)
+            if done:
+                result = info.get("episode_result")
+                if result is not None:
+                    finished.append((self.episode_stage[rank], result))
+                self.episode_stage[rank] = stage_index
+        self.term_count += len(infos)
+        return finished
+
+    def add_sums(self, sums: dict[str, float], count: int) -> None:
+        for key, value in sums.items():
+            self.term_sums[key] = self.term_sums.get(key, 0.0) + value
+        self.term_count += count
+
+    def pop_sums(self) -> tuple[dict[str, float], int]:
+        sums, count = self.term_sums, self.term_count
+        self.term_sums, self.term_count = {}, 0
+        return sums, count
+
+
 class EpisodeCollector(BaseCallback):
     """SB3 callback: gathers finished episodes of the current stage (with the env step and
     the run's training wall time at which each ended), logs reward terms, drives the progress
@@ -25,27 +62,18 @@ class EpisodeCollector(BaseCallback):
         super().__init__(verbose=0)
         self.run_wall_s = run_wall_s
         self.update_threads = update_threads
-        self.terms = tuple(t for t in terms if t != "done")
+        self.tally = EpisodeTally(n_envs, terms, stage_index)
         self.stage_index = stage_index
-        self.episode_stage = [stage_index] * n_envs  # stage each env's current episode began in
         self.results: list[tuple[int, float, EpisodeResult]] = []
-        self.term_sums: dict[str, float] = {}
-        self.term_count = 0
         self.stop_requested: str | None = None
         self.progress_bar: Any = None
 
     def _on_step(self) -> bool:
         infos, dones = self.locals["infos"], self.locals["dones"]
         wall_s = self.run_wall_s() if dones.any() else 0.0
-        for rank, (info, done) in enumerate(zip(infos, dones)):
-            for key in self.terms:
-                self.term_sums[key] = self.term_sums.get(key, 0.0) + info.get(key, 0.0)
-            if done:
-                result = info.get("episode_result")
-                if result is not None and self.episode_stage[rank] == self.stage_index:
-                    self.results.append((self.num_timesteps, wall_s, result))
-                self.episode_stage[rank] = self.stage_index
-        self.term_count += len(infos)
+        for began, result in self.tally.observe(infos, dones, self.stage_index):
+            if began == self.stage_index:
+                self.results.append((self.num_timesteps, wall_s, result))
         if self.progress_bar is not None:
             self.progress_bar.update(len(infos))
         return self.stop_requested is None
@@ -80,9 +108,8 @@ class EpisodeCollector(BaseCallback):
         self.results.extend((step, wall_s, result) for step, wall_s, stage, result in episodes
                             if stage == self.stage_index)
         for sums in term_sums:
-            for key, value in sums.items():
-                self.term_sums[key] = self.term_sums.get(key, 0.0) + value
-        self.term_count += term_count
+            self.tally.add_sums(sums, 0)
+        self.tally.add_sums({}, term_count)
         if self.progress_bar is not None:
             self.progress_bar.update(steps)
 
@@ -91,9 +118,8 @@ class EpisodeCollector(BaseCallback):
         return results
 
     def pop_term_means(self) -> dict[str, float]:
-        means = {k: v / self.term_count for k, v in self.term_sums.items()} if self.term_count else {}
-        self.term_sums, self.term_count = {}, 0
-        return means
+        sums, count = self.tally.pop_sums()
+        return {k: v / count for k, v in sums.items()} if count else {}
 
 
 # -- the run -----------------------------------------------------------------------------

@@ -24,6 +24,7 @@ from myo_sds.curricula.schema import RunConfig
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.metrics import EpisodeResult
 from myo_sds.sb3_internals import drop_queued_seeds, prepare_rollout
+from myo_sds.training.callbacks import EpisodeTally
 from myo_sds.training.factory import apply_ppo_settings, build_model, env_factory, normalized
 
 BUFFER_FIELDS = ("observations", "actions", "rewards", "returns", "episode_starts", "values", "log_probs",
@@ -75,30 +76,21 @@ class _WorkerCallback(BaseCallback):
 
     def __init__(self, n_envs: int, terms: tuple[str, ...]) -> None:
         super().__init__(verbose=0)
-        self.terms = tuple(t for t in terms if t != "done")
-        self.episode_stage = [0] * n_envs
+        self.tally = EpisodeTally(n_envs, terms)
         self.stage_index = 0
         self.reset()
 
     def reset(self) -> None:
         self.episodes: list[tuple[int, float, int, EpisodeResult]] = []
-        self.term_sums: dict[str, float] = {}
-        self.term_count = 0
+        self.tally.pop_sums()
         self.step_index = 0
         self.started_at = time.perf_counter()
 
     def _on_step(self) -> bool:
         infos, dones = self.locals["infos"], self.locals["dones"]
         elapsed = time.perf_counter() - self.started_at
-        for rank, (info, done) in enumerate(zip(infos, dones)):
-            for key in self.terms:
-                self.term_sums[key] = self.term_sums.get(key, 0.0) + info.get(key, 0.0)
-            if done:
-                result = info.get("episode_result")
-                if result is not None:
-                    self.episodes.append((self.step_index, elapsed, self.episode_stage[rank], result))
-                self.episode_stage[rank] = self.stage_index
-        self.term_count += len(infos)
+        for began, result in self.tally.observe(infos, dones, self.stage_index):
+            self.episodes.append((self.step_index, elapsed, began, result))
         self.step_index += 1
         return True
 
@@ -160,7 +152,7 @@ class RolloutWorker:
             obs_rms=copy.deepcopy(venv.obs_rms), ret_rms=copy.deepcopy(venv.ret_rms),
             obs_added=Moments.of(venv.obs_rms).added_since(start_obs),
             ret_added=Moments.of(venv.ret_rms).added_since(start_ret),
-            episodes=callback.episodes, term_sums=callback.term_sums, term_count=callback.term_count,
+            episodes=callback.episodes, term_sums=callback.tally.term_sums, term_count=callback.tally.term_count,
             seconds=time.perf_counter() - callback.started_at)
 
     def set_stage(self, distribution: TaskKnobs) -> None:
