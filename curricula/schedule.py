@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from myo_sds.curricula.schema import RunConfig
-from myo_sds.curricula.settings import LearningRateDecay
+from myo_sds.run_settings import LearningRateDecay
 
 
 @dataclass(frozen=True)

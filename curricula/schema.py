@@ -13,24 +13,19 @@ from typing import Any
 
 import yaml
 
-from myo_sds.curricula.settings import (
-    VEC_ENVS,
+from myo_sds.curricula.yaml_reader import ConfigError, YamlReader, load_yaml
+from myo_sds.declare import integer, number, one_of, optional, read_settings, setting, text
+from myo_sds.envs.knobs import TaskKnobs
+from myo_sds.envs.task_specs import TASK_SPECS
+from myo_sds.run_settings import (
     LearningRate,
     NormalizeConfig,
     PolicyConfig,
     PpoConfig,
     RolloutConfig,
-    integer,
+    RunSettings,
     learning_rate,
-    number,
-    one_of,
-    optional,
-    read_settings,
-    setting,
 )
-from myo_sds.curricula.yaml_reader import ConfigError, YamlReader, load_yaml
-from myo_sds.envs.knobs import TaskKnobs
-from myo_sds.envs.task_specs import TASK_SPECS
 
 METRICS = ("score", "survival")
 ON_MAX_STEPS = ("advance", "stop")
@@ -43,14 +38,16 @@ class AdvanceRule:
     ``plateau_steps`` env steps (with a full window, after ``min_steps``), the stage ends
     unpassed and the run advances or stops (``on_max_steps``)."""
 
-    metric: str = setting("score", one_of(*METRICS))
-    threshold: float = setting(0.5, number(low=0, high=1))
-    window: int = setting(100, integer(low=1))
-    min_steps: int = setting(0, integer(low=0))
-    max_steps: int | None = setting(None, optional(integer(low=1)))
-    on_max_steps: str = setting("advance", one_of(*ON_MAX_STEPS))
-    plateau_steps: int | None = setting(None, optional(integer(low=1)))
-    plateau_gain: float = setting(0.01, number(low=0))
+    metric: str = setting("score", parse=one_of(*METRICS), help="score (official) | survival")
+    threshold: float = setting(0.5, parse=number(low=0, high=1), help="the window's mean that passes the stage")
+    window: int = setting(100, parse=integer(low=1), help="the stage's last training episodes averaged")
+    min_steps: int = setting(0, parse=integer(low=0), help="env steps in the stage before it may pass")
+    max_steps: int | None = setting(None, parse=optional(integer(low=1)), help="then the stage ends unpassed")
+    on_max_steps: str = setting("advance", parse=one_of(*ON_MAX_STEPS),
+                                help="after an unpassed end: advance to the next stage, or stop the run")
+    plateau_steps: int | None = setting(None, parse=optional(integer(low=1)),
+                                        help="also end unpassed when the mean has not risen plateau_gain for this long")
+    plateau_gain: float = setting(0.01, parse=number(low=0), help="the rise that counts for plateau_steps")
 
     @property
     def tracked_gain(self) -> float | None:
@@ -70,24 +67,24 @@ class StageEvaluation:
     ``hand_off: best`` the next stage starts from it (weights, optimizer and normalization
     statistics of that step), with ``last`` from the stage's last policy."""
 
-    every: int = setting(MISSING, integer(low=1))
-    episodes: int = setting(10, integer(low=1))
-    env: str = setting("stage", lambda reader, key, value: reader.string(key, value))
-    start_noise: float = setting(0.0, number(low=0))
-    hand_off: str = setting("best", one_of(*HAND_OFFS))
+    every: int = setting(MISSING, parse=integer(low=1), help="env steps between evaluations, e.g. 250000")
+    episodes: int = setting(10, parse=integer(low=1), help="deterministic episodes per evaluation")
+    env: str = setting("stage", parse=text, help="stage (the stage's own task) or a preset, e.g. p1_2022")
+    start_noise: float = setting(0.0, parse=number(low=0), help="rad: each hand joint moved by up to this at reset")
+    hand_off: str = setting("best", parse=one_of(*HAND_OFFS), help="best | last: the policy the next stage starts from")
 
 
 @dataclass(frozen=True)
 class PpoOverrides:
     """PPO settings a stage changes at its start (None: keep the current value)."""
 
-    learning_rate: LearningRate | None = setting(None, learning_rate)
-    n_steps: int | None = setting(None, integer(low=1))
-    batch_size: int | None = setting(None, integer(low=1))
-    clip_range: float | None = setting(None, number(low=0, strict_low=True))
-    ent_coef: float | None = setting(None, number(low=0))
-    n_epochs: int | None = setting(None, integer(low=1))
-    target_kl: float | None = setting(None, number(low=0, strict_low=True))
+    learning_rate: LearningRate | None = setting(None, parse=learning_rate, help="a rate, or {start, end, steps}")
+    n_steps: int | None = setting(None, parse=integer(low=1), help="rollout steps per env")
+    batch_size: int | None = setting(None, parse=integer(low=1), help="samples per minibatch")
+    clip_range: float | None = setting(None, parse=number(low=0, strict_low=True), help="PPO's clip range")
+    ent_coef: float | None = setting(None, parse=number(low=0), help="entropy bonus")
+    n_epochs: int | None = setting(None, parse=integer(low=1), help="passes over each rollout")
+    target_kl: float | None = setting(None, parse=number(low=0, strict_low=True), help="SB3's early stop of an update")
 
     def as_dict(self) -> dict[str, float | int]:
         return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
@@ -122,16 +119,17 @@ class Curriculum:
 class RunConfig:
     curriculum: Curriculum
     curriculum_path: Path
-    seed: int = 0
-    n_envs: int = 4
-    vec_env: str = "thread"  # thread: envs stepped on a thread pool in this process
-    env_threads: int = 0  # threads stepping envs (vec_env: thread); 0 = one per core
-    device: str = "cpu"
-    num_threads: int = 0  # torch threads for the policy; 0 = one per core
-    total_steps: int = 1_000_000
-    checkpoint_every: int = 50_000  # env steps
-    keep_checkpoints: int = 3
-    output_dir: Path = Path("runs")
+    # The top level's values (myo_sds.run_settings.RunSettings, where each is declared).
+    seed: int = RunSettings.seed
+    n_envs: int = RunSettings.n_envs
+    vec_env: str = RunSettings.vec_env
+    env_threads: int = RunSettings.env_threads
+    device: str = RunSettings.device
+    num_threads: int = RunSettings.num_threads
+    total_steps: int = RunSettings.total_steps
+    checkpoint_every: int = RunSettings.checkpoint_every
+    keep_checkpoints: int = RunSettings.keep_checkpoints
+    output_dir: Path = RunSettings.output_dir
     policy: PolicyConfig = PolicyConfig()
     ppo: PpoConfig = PpoConfig()
     normalize: NormalizeConfig = NormalizeConfig()
@@ -164,8 +162,6 @@ def _stage_distribution(reader: YamlReader, key: str, task: str, knobs: Mapping[
 def _stage_evaluation(reader: YamlReader, key: str, task: str, raw: Any) -> StageEvaluation | None:
     if raw is None:
         return None
-    if isinstance(raw, Mapping) and "every" not in raw:
-        raise reader.error(f"{key}.every", "missing: env steps between evaluations, e.g. 250000")
     evaluation = read_settings(reader, key, raw, StageEvaluation)
     presets = TASK_SPECS[task].knobs.PRESETS
     if evaluation.env != "stage" and evaluation.env not in presets:
@@ -191,8 +187,8 @@ def load_curriculum(path: str | Path) -> Curriculum:
     raw = reader.mapping("", load_yaml(path, "curriculum"), ("name", "task", "defaults", "stages"))
     if not raw:
         raise reader.error("", "the curriculum file is empty")
-    task = reader.choice("task", raw.get("task", "baoding"), tuple(TASK_SPECS))
-    name = reader.string("name", raw.get("name", path.stem))
+    task = reader.read("task", raw.get("task", "baoding"), one_of(*TASK_SPECS))
+    name = reader.read("name", raw.get("name", path.stem), text)
     defaults = reader.mapping("defaults", raw.get("defaults"), ("preset", *TASK_SPECS[task].knobs.help()))
     stages_raw = raw.get("stages")
     if not isinstance(stages_raw, list) or not stages_raw:
@@ -201,7 +197,7 @@ def load_curriculum(path: str | Path) -> Curriculum:
     for index, stage_raw in enumerate(stages_raw):
         key = stage_label(index)  # stages count from 1, as on the console
         stage_raw = reader.mapping(key, stage_raw, ("name", "env", "advance", "ppo", "evaluate"))
-        stage_name = reader.string(f"{key} name", stage_raw.get("name", f"stage_{index + 1}"))
+        stage_name = reader.read(f"{key} name", stage_raw.get("name", f"stage_{index + 1}"), text)
         if stage_name in seen:
             raise reader.error(f"{key} name", f"duplicate stage name {stage_name!r}")
         seen.add(stage_name)
@@ -218,8 +214,7 @@ def load_curriculum(path: str | Path) -> Curriculum:
 
 # -- run config --------------------------------------------------------------------------
 
-RUN_KEYS = ("curriculum", "seed", "n_envs", "vec_env", "env_threads", "device", "num_threads", "total_steps", "rollout",
-            "checkpoint_every", "keep_checkpoints", "output_dir", "policy", "ppo", "normalize")
+RUN_KEYS = ("curriculum", *(f.name for f in fields(RunSettings)), "policy", "ppo", "normalize", "rollout")
 
 
 def _set_key(reader: YamlReader, raw: dict[str, Any], assignment: str) -> None:
@@ -255,23 +250,14 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     reader.mapping("", raw, RUN_KEYS)
     if "curriculum" not in raw:
         raise reader.error("curriculum", "missing: the curriculum file this run follows")
-    curriculum_path = Path(reader.string("curriculum", raw["curriculum"]))
+    curriculum_path = Path(reader.read("curriculum", raw["curriculum"], text))
     if not curriculum_path.is_absolute():
         curriculum_path = (path.parent / curriculum_path).resolve()
     if not curriculum_path.is_file():
         raise reader.error("curriculum", f"curriculum file not found: {curriculum_path}")
-    values: dict[str, Any] = {}
-    integer_keys = {"seed": 0, "n_envs": 1, "env_threads": 0, "num_threads": 0, "total_steps": 1,
-                    "checkpoint_every": 1, "keep_checkpoints": 1}
-    for key, low in integer_keys.items():
-        if key in raw:
-            values[key] = reader.number(key, raw[key], integer=True, low=low)
-    if "vec_env" in raw:
-        values["vec_env"] = reader.choice("vec_env", raw["vec_env"], VEC_ENVS)
-    if "device" in raw:
-        values["device"] = reader.choice("device", raw["device"], ("cpu", "cuda", "auto"))
-    if "output_dir" in raw:
-        values["output_dir"] = Path(reader.string("output_dir", raw["output_dir"]))
+    sections = ("curriculum", "policy", "ppo", "normalize", "rollout")
+    top = read_settings(reader, "", {k: v for k, v in raw.items() if k not in sections}, RunSettings)
+    values: dict[str, Any] = {f.name: getattr(top, f.name) for f in fields(RunSettings)}
     values["policy"] = read_settings(reader, "policy", raw.get("policy"), PolicyConfig)
     for key, default in (("action_mean_bound", 0.0), ("action_head_lr_scale", 1.0), ("exploration", "gaussian")):
         if getattr(values["policy"], key) != default and not values["policy"].fast_lstm_update:
@@ -287,7 +273,7 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     values["rollout"] = read_settings(reader, "rollout", raw.get("rollout"), RolloutConfig)
     if values["rollout"].backend == "ray":
         rollout_config = values["rollout"]
-        n_envs = values.get("n_envs", RunConfig.n_envs)
+        n_envs = values["n_envs"]
         per_worker = rollout_config.envs_per_worker or n_envs // rollout_config.workers
         if per_worker < 1:
             raise reader.error("rollout.envs_per_worker", f"must be >= 1 (n_envs {n_envs} over "

@@ -8,7 +8,6 @@ checked and converted here, never assumed.
 from __future__ import annotations
 
 import difflib
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -56,41 +55,15 @@ class YamlReader:
                 raise self.error(f"{prefix}{name}", f"unknown key{hint}; allowed: {', '.join(allowed)}")
         return value
 
-    def number(self, key: str, value: Any, *, integer: bool = False, low: float | None = None,
-               high: float | None = None, strict_low: bool = False) -> float | int:
-        kind = "an integer" if integer else "a number"
-        if isinstance(value, bool):
-            raise self.error(key, f"expected {kind}, got the boolean {value!r}")
+    def read(self, key: str, value: Any, parse) -> Any:
+        """``parse(key, value)`` (a :mod:`myo_sds.declare` parser), its ``ValueError`` turned into
+        this file's ``ConfigError`` at the key it names."""
+        from myo_sds.declare import split_message
+
         try:
-            number = float(value)  # PyYAML reads 3e-4 as a string
-        except (TypeError, ValueError):
-            raise self.error(key, f"expected {kind}, got {value!r}") from None
-        if not math.isfinite(number):
-            raise self.error(key, f"expected a finite number, got {value!r}")
-        if integer:
-            if number != int(number):
-                raise self.error(key, f"expected an integer, got {value!r}")
-            number = int(number)
-        if low is not None and (number <= low if strict_low else number < low):
-            raise self.error(key, f"must be {'>' if strict_low else '>='} {low}, got {value!r}")
-        if high is not None and number > high:
-            raise self.error(key, f"must be <= {high}, got {value!r}")
-        return number
-
-    def boolean(self, key: str, value: Any) -> bool:
-        if not isinstance(value, bool):
-            raise self.error(key, f"expected true or false, got {value!r}")
-        return value
-
-    def choice(self, key: str, value: Any, allowed: tuple[str, ...]) -> str:
-        if value not in allowed:
-            raise self.error(key, f"{value!r} is not one of {', '.join(allowed)}")
-        return value
-
-    def string(self, key: str, value: Any) -> str:
-        if not isinstance(value, str) or not value:
-            raise self.error(key, f"expected a non-empty string, got {value!r}")
-        return value
+            return parse(key, value)
+        except ValueError as error:
+            raise self.error(*split_message(key, str(error))) from None
 
 
 def _related(key: str, dotted: str) -> bool:

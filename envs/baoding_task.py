@@ -19,7 +19,6 @@ from myo_sds.envs.knobs import (
     check_complete,
     choice,
     count,
-    knob,
     optional,
     parse_choice,
     parse_probability,
@@ -28,6 +27,7 @@ from myo_sds.envs.knobs import (
     parse_vector_range,
     ranged,
     scalar,
+    setting,
     to_float,
     weights,
 )
@@ -140,46 +140,46 @@ class BaodingKnobs(TaskKnobs):
         },
     }
 
-    direction: str = knob("ccw", parse=choice(*DIRECTIONS, "random"),
+    direction: str = setting("ccw", parse=choice(*DIRECTIONS, "random"),
                           help="hold | cw | ccw | random (uniform over the three, as in P2)")
-    period: Range | None = knob(Range(5.0, 5.0), parse=_period,  # None: static targets
+    period: Range | None = setting(Range(5.0, 5.0), parse=_period,  # None: static targets
                                 help="seconds per revolution of the targets: a value, [min, max], or 'static'")
-    x_radius: Range = knob(Range(0.025, 0.025), parse=ranged(positive=True),
+    x_radius: Range = setting(Range(0.025, 0.025), parse=ranged(positive=True),
                            help="m, ellipse half-axis along the palm's x: a value or [min, max]")
-    y_radius: Range = knob(Range(0.028, 0.028), parse=ranged(positive=True),
+    y_radius: Range = setting(Range(0.028, 0.028), parse=ranged(positive=True),
                            help="m, ellipse half-axis along the palm's y: a value or [min, max]")
-    start_angle: str | float = knob("fixed", parse=_start_angle,
+    start_angle: str | float = setting("fixed", parse=_start_angle,
                                     help="'fixed' (official pi/4), 'on_balls' (3pi/4), 'uniform', or radians")
-    start_offset: Range | None = knob(None, parse=optional(ranged()),
+    start_offset: Range | None = setting(None, parse=optional(ranged()),
                                       help="rad added to the start angle: a value or [min, max]")
-    rsi_probability: float = knob(0.0, parse=parse_probability,
+    rsi_probability: float = setting(0.0, parse=parse_probability,
                                   help="probability the balls start exactly on their targets (RSI)")
-    rsi_height: str = knob("target", parse=choice(*RSI_HEIGHTS),
+    rsi_height: str = setting("target", parse=choice(*RSI_HEIGHTS),
                            help="how an RSI start places each ball: 'clear' (on its target, then moved the least distance "
                                 "out of the hand), 'target' (on its target, even inside the palm), 'rest' (the target's "
                                 "x, y at the ball's resting height, as the 2022 winner's env)")
-    recorded_start: RecordedStart | None = knob(
+    recorded_start: RecordedStart | None = setting(
         None, parse=optional(parse_recorded_start),
         help="null, or {probability, capacity: 1000, every: 4, solved_only: true}: a share of resets starts from a "
              "whole state (hand, velocities, activations, balls) recorded at a solved step of this env's own earlier "
              "episodes, the targets placed on the balls (plus start_offset), with the stage's direction and period; "
              "the bank is per env, bounded, and refills after --resume")
-    ball_size: Range | None = knob(None, parse=optional(ranged(positive=True)),
+    ball_size: Range | None = setting(None, parse=optional(ranged(positive=True)),
                                    help="m, ball radius: null (model's 0.022), a value, or [min, max]")
-    ball_mass: Range | None = knob(None, parse=optional(ranged(positive=True)),
+    ball_mass: Range | None = setting(None, parse=optional(ranged(positive=True)),
                                    help="kg: null (model's 0.043), a value, or [min, max]")
-    ball_friction: tuple[tuple[float, ...], tuple[float, ...]] | None = knob(
+    ball_friction: tuple[tuple[float, ...], tuple[float, ...]] | None = setting(
         None, parse=optional(_friction), help="null (model's), [slide, torsion, roll], or [[3 lows], [3 highs]]")
-    finger_noise: float = knob(0.0, parse=scalar(minimum=0.0),
+    finger_noise: float = setting(0.0, parse=scalar(minimum=0.0),
                                help="rad, uniform +- noise on the 20 finger joints at reset")
-    palm_noise: float = knob(0.0, parse=scalar(minimum=0.0), help="rad, uniform +- noise on the 3 wrist joints at reset")
-    drop_height: float = knob(1.25, parse=to_float, help="m, a ball below this height is dropped and ends the episode")
-    solved_radius: float = knob(0.015, parse=scalar(positive=True),
+    palm_noise: float = setting(0.0, parse=scalar(minimum=0.0), help="rad, uniform +- noise on the 3 wrist joints at reset")
+    drop_height: float = setting(1.25, parse=to_float, help="m, a ball below this height is dropped and ends the episode")
+    solved_radius: float = setting(0.015, parse=scalar(positive=True),
                                 help="m, both balls within this distance of their targets = solved")
-    episode_steps: int | None = knob(None, parse=optional(count()),
+    episode_steps: int | None = setting(None, parse=optional(count()),
                                      help="control steps per episode: null (the official 200) or a count, e.g. 400 for "
                                           "two 5 s orbits; the score stays solved steps over this count")
-    reward_weights: Mapping[str, float] = knob(
+    reward_weights: Mapping[str, float] = setting(
         default_factory=lambda: {"pos_dist_1": 5.0, "pos_dist_2": 5.0}, parse=weights(REWARD_TERMS),
         help=f"mapping term -> weight over {', '.join(REWARD_TERMS)}")
 

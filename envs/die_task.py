@@ -14,12 +14,12 @@ from myo_sds.envs.knobs import (
     RecordedStart,
     TaskKnobs,
     check_complete,
-    knob,
     optional,
     parse_range,
     parse_recorded_start,
     ranged,
     scalar,
+    setting,
     to_float,
     weights,
 )
@@ -80,29 +80,29 @@ class DieKnobs(TaskKnobs):
                "mass": [0.050, 0.250], "friction_change": [0.2, 0.001, 0.00002]},
     }
 
-    goal_position: Range = knob(Range(-0.010, 0.010), parse=ranged(),
+    goal_position: Range = setting(Range(-0.010, 0.010), parse=ranged(),
                                 help="m, offset of the goal from its nominal position on each axis: a value or [min, max]")
-    goal_rotation: tuple[Range, Range, Range] = knob(
+    goal_rotation: tuple[Range, Range, Range] = setting(
         (Range(-1.57, 1.57),) * 3, parse=_goal_rotation,
         help="rad, goal Euler angles: [min, max] for all axes, or [[min, max] x 3] per axis")
-    size_change: float = knob(0.0, parse=scalar(minimum=0.0), help="m, the die's half-sizes change by U(-value, value)")
-    mass: Range = knob(Range(0.108, 0.108), parse=ranged(positive=True), help="kg, die mass: a value or [min, max]")
-    friction_change: tuple[float, float, float] = knob(
+    size_change: float = setting(0.0, parse=scalar(minimum=0.0), help="m, the die's half-sizes change by U(-value, value)")
+    mass: Range = setting(Range(0.108, 0.108), parse=ranged(positive=True), help="kg, die mass: a value or [min, max]")
+    friction_change: tuple[float, float, float] = setting(
         (0.0, 0.0, 0.0), parse=_friction_change, help="[slide, torsion, roll]: friction = nominal +- U(change) per geom")
-    hand_noise: float = knob(0.0, parse=scalar(minimum=0.0), help="rad, uniform +- noise on the 23 hand joints at reset")
-    recorded_start: RecordedStart | None = knob(
+    hand_noise: float = setting(0.0, parse=scalar(minimum=0.0), help="rad, uniform +- noise on the 23 hand joints at reset")
+    recorded_start: RecordedStart | None = setting(
         None, parse=optional(parse_recorded_start),
         help="null, or {probability, capacity: 1000, every: 4, solved_only: true}: a share of resets starts from a "
              "whole state (hand, die, velocities, activations) recorded in this env's own earlier episodes, with the "
              "goal drawn as the stage's knobs say (solved_only: false records unsolved steps too); the bank is per "
              "env, bounded, and refills after --resume")
-    position_threshold: float = knob(0.025, parse=scalar(positive=True),
+    position_threshold: float = setting(0.025, parse=scalar(positive=True),
                                      help="m, solved when the die is closer than this to the goal ...")
-    rotation_threshold: float = knob(0.262, parse=scalar(positive=True),
+    rotation_threshold: float = setting(0.262, parse=scalar(positive=True),
                                      help="rad, ... and its orientation error is below this")
-    drop_threshold: float = knob(0.200, parse=scalar(positive=True),
+    drop_threshold: float = setting(0.200, parse=scalar(positive=True),
                                  help="m, a die farther than this from the goal is dropped")
-    reward_weights: Mapping[str, float] = knob(
+    reward_weights: Mapping[str, float] = setting(
         default_factory=lambda: {"pos_dist": 100.0, "rot_dist": 1.0, "bonus": 0.0, "act_reg": 0.0, "penalty": 0.0},
         parse=weights(REWARD_TERMS), help=f"mapping term -> weight over {', '.join(REWARD_TERMS)}")
 

@@ -8,11 +8,13 @@ string; numbers given as strings are accepted when they parse as floats.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import MISSING, dataclass, field, fields
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
+
+from myo_sds.declare import Parser, describe, one_of, optional, setting  # noqa: F401  (the knobs' helpers)
 
 
 def to_float(name: str, value: Any) -> float:
@@ -191,18 +193,11 @@ def parse_recorded_start(name: str, value: Any) -> RecordedStart:
 # -- declaring a task's knobs --------------------------------------------------------------
 
 DEFAULT_PRESET = "p1"
-Parser = Callable[[str, Any], Any]  # (knob name, value as written) -> typed value, or ValueError
-
-
-def knob(default: Any = MISSING, *, parse: Parser, help: str, default_factory: Callable[[], Any] | Any = MISSING):
-    """A task knob, declared once as a field of a :class:`TaskKnobs` dataclass: its type (the
-    annotation), its default (typed), how a written value is checked and read, what it means."""
-    return field(default=default, default_factory=default_factory, metadata={"parse": parse, "help": help})
 
 
 class TaskKnobs:
     """Base of a task's knob dataclass (``@dataclass(frozen=True)`` subclasses whose fields are
-    :func:`knob` declarations). ``parse`` turns a preset and written values into an instance."""
+    :func:`~myo_sds.declare.setting` declarations). ``parse`` turns a preset and written values into an instance."""
 
     KIND: ClassVar[str]  # "Baoding knob", in error messages
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]]  # preset name -> written values
@@ -210,7 +205,7 @@ class TaskKnobs:
     @classmethod
     def help(cls) -> dict[str, str]:
         """Each knob's name and meaning, in declaration order."""
-        return {f.name: f.metadata["help"] for f in fields(cls)}
+        return describe(cls)
 
     @classmethod
     def parse(cls, preset: str = DEFAULT_PRESET, **written: Any):
@@ -244,13 +239,8 @@ def count() -> Parser:
     return parse
 
 
-def optional(parse: Parser) -> Parser:
-    """``null`` (None: the model's own value) or what ``parse`` reads."""
-    return lambda name, value: None if value is None else parse(name, value)
-
-
 def choice(*allowed: str) -> Parser:
-    return lambda name, value: parse_choice(name, value, allowed)
+    return one_of(*allowed)
 
 
 def weights(terms: Iterable[str]) -> Parser:

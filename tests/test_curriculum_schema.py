@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from myo_sds.curricula.schema import ConfigError, load_curriculum, load_run_config
-from myo_sds.curricula.settings import LearningRateDecay, PpoWarmup
+from myo_sds.run_settings import LearningRateDecay, PpoWarmup
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -257,3 +257,22 @@ def test_a_stage_changes_epochs_and_target_kl_until_a_later_stage_does(tmp_path)
     second = ppo_settings_at(config, 1, [0, 500], 600)
     assert (first.n_epochs, first.target_kl) == (10, None)
     assert (second.n_epochs, second.target_kl) == (5, 0.2)
+
+
+def test_every_setting_is_declared_one_way_with_a_parser_and_a_meaning():
+    from dataclasses import fields
+
+    from myo_sds import run_settings
+    from myo_sds.curricula import schema
+    from myo_sds.envs.baoding_task import BaodingKnobs
+    from myo_sds.envs.die_task import DieKnobs
+
+    declared = (run_settings.RunSettings, run_settings.PolicyConfig, run_settings.PpoConfig,
+                run_settings.NormalizeConfig, run_settings.RolloutConfig, schema.AdvanceRule, schema.StageEvaluation,
+                schema.PpoOverrides, BaodingKnobs, DieKnobs)
+    for cls in declared:
+        for field in fields(cls):
+            assert callable(field.metadata.get("parse")), f"{cls.__name__}.{field.name}"
+            assert field.metadata.get("help"), f"{cls.__name__}.{field.name}"
+    # The run config's top level is read through them too: a bad value names the file and key.
+    assert set(schema.RUN_KEYS) >= {f.name for f in fields(run_settings.RunSettings)}

@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from myo_sds.envs.hand_env import MuscleHandEnv
-from myo_sds.envs.knobs import Range, TaskKnobs, check_complete, knob, ranged, scalar, weights
+from myo_sds.envs.knobs import Range, TaskKnobs, check_complete, ranged, scalar, setting, weights
 from myo_sds.envs.registry import TaskSpec, solved_fraction
 
 REWARD_TERMS = ("angle_dist", "act_reg", "solved", "done")
@@ -32,9 +32,9 @@ class WristKnobs(TaskKnobs):
     KIND: ClassVar[str] = "wrist knob"
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {"p1": {}, "wide": {"target": [-0.6, 0.6]}}
 
-    target: Range = knob(Range(0.3, 0.3), parse=ranged(), help="rad, the flexion angle to hold")
-    tolerance: float = knob(0.1, parse=scalar(positive=True), help="rad, solved within this of the target")
-    reward_weights: Mapping[str, float] = knob(default_factory=lambda: {"angle_dist": 1.0, "solved": 1.0},
+    target: Range = setting(Range(0.3, 0.3), parse=ranged(), help="rad, the flexion angle to hold")
+    tolerance: float = setting(0.1, parse=scalar(positive=True), help="rad, solved within this of the target")
+    reward_weights: Mapping[str, float] = setting(default_factory=lambda: {"angle_dist": 1.0, "solved": 1.0},
                                                parse=weights(REWARD_TERMS), help="term -> weight")
 
 

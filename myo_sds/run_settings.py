@@ -1,0 +1,185 @@
+"""The run config's settings: the run's top level, the policy network, PPO, observation and
+reward normalization, and where rollouts run (locally or on Ray). Each field is declared once
+with :func:`~myo_sds.declare.setting` (default, parser, meaning); ``curricula.schema`` reads a
+run config through them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from myo_sds.declare import boolean, check_keys, integer, number, one_of, optional, setting, text
+
+ACTIVATIONS = ("relu", "tanh", "elu", "leaky_relu")
+VEC_ENVS = ("thread", "dummy", "subproc")
+DEVICES = ("cpu", "cuda", "auto")
+ROLLOUT_BACKENDS = ("local", "ray")
+EXPLORATIONS = ("gaussian", "lattice")
+
+
+@dataclass(frozen=True)
+class LearningRateDecay:
+    """A learning rate that falls log-linearly from ``start`` to ``end`` over ``steps`` env
+    steps, then stays at ``end``. Its clock starts where it is set: the run's first step for
+    the run config's ``ppo``, the stage's first step for a stage's ``ppo``.
+
+    YAML: ``learning_rate: {start: 3.0e-3, end: 1.0e-4, steps: 1500000}``.
+    """
+
+    start: float
+    end: float
+    steps: int
+
+    def at(self, elapsed_steps: int) -> float:
+        """The learning rate ``elapsed_steps`` env steps after the clock started."""
+        fraction = min(max(elapsed_steps / self.steps, 0.0), 1.0)
+        return self.start * (self.end / self.start) ** fraction
+
+
+LearningRate = float | LearningRateDecay
+
+
+def learning_rate(name: str, value: Any) -> LearningRate:
+    """A rate (> 0) or ``{start, end, steps}``: a log-linear decay over env steps."""
+    if not isinstance(value, Mapping):
+        return number(low=0, strict_low=True)(name, value)
+    names = tuple(f.name for f in fields(LearningRateDecay))
+    check_keys(name, value, names)
+    missing = [key for key in names if key not in value]
+    if missing:
+        raise ValueError(f"{name}: a learning-rate decay needs {', '.join(names)}; missing: {', '.join(missing)}")
+    rate = number(low=0, strict_low=True)
+    return LearningRateDecay(start=rate(f"{name}.start", value["start"]), end=rate(f"{name}.end", value["end"]),
+                             steps=integer(low=1)(f"{name}.steps", value["steps"]))
+
+
+def layers(name: str, value: Any) -> tuple[int, ...]:
+    # []: the LSTMs feed the action and value heads directly (the 2022 phase-1 network).
+    if not isinstance(value, (list, tuple)):
+        raise ValueError(f"{name}: expected a list of layer sizes ([] for none), got {value!r}")
+    return tuple(integer(low=1)(f"{name}[{i}]", v) for i, v in enumerate(value))
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """The run config's top level (besides ``curriculum`` and the sections below)."""
+
+    seed: int = setting(0, parse=integer(low=0), help="seeds the envs, the policy and the minibatch order")
+    n_envs: int = setting(4, parse=integer(low=1), help="envs stepped in parallel")
+    vec_env: str = setting("thread", parse=one_of(*VEC_ENVS),
+                           help="thread (envs on a thread pool in this process) | dummy | subproc")
+    env_threads: int = setting(0, parse=integer(low=0), help="threads stepping envs (vec_env: thread); 0: one per CPU")
+    device: str = setting("cpu", parse=one_of(*DEVICES), help="where the policy trains")
+    num_threads: int = setting(0, parse=integer(low=0), help="torch threads for updates; 0: follow the free CPUs")
+    total_steps: int = setting(1_000_000, parse=integer(low=1), help="env steps of the whole run")
+    checkpoint_every: int = setting(50_000, parse=integer(low=1), help="env steps between checkpoints")
+    keep_checkpoints: int = setting(3, parse=integer(low=1), help="newest checkpoints kept")
+    output_dir: Path = setting(Path("runs"), parse=lambda name, value: Path(text(name, value)),
+                               help="where new run folders are made")
+
+
+@dataclass(frozen=True)
+class PolicyConfig:
+    lstm_hidden_size: int = setting(256, parse=integer(low=1), help="units of each LSTM")
+    enable_critic_lstm: bool = setting(True, parse=boolean, help="a separate LSTM for the critic")
+    net_arch: tuple[int, ...] = setting((256, 256), parse=layers, help="layers after each LSTM ([]: none)")
+    activation: str = setting("relu", parse=one_of(*ACTIVATIONS), help="activation of those layers")
+    log_std_init: float = setting(-2.0, parse=number(), help="initial log standard deviation of the action noise")
+    ortho_init: bool = setting(True, parse=boolean, help="orthogonal initialization of the networks")
+    fast_lstm_update: bool = setting(
+        True, parse=boolean, help="one LSTM call per sequence in updates (same function, faster); false: "
+                                  "sb3-contrib's step-by-step loop, kept to reproduce the reference setup's speed")
+    action_mean_bound: float = setting(
+        0.0, parse=number(low=0), help="soft bound on the Gaussian's mean, bound * tanh(mean / bound); 0: unbounded "
+                                       "(needs fast_lstm_update)")
+    action_head_lr_scale: float = setting(
+        1.0, parse=number(low=0, strict_low=True),
+        help="the actor's output layer learns this many times as fast as the rest (needs fast_lstm_update)")
+    exploration: str = setting(
+        "gaussian", parse=one_of(*EXPLORATIONS),
+        help="gaussian: independent noise on each muscle; lattice: noise in the latent state, correlated across "
+             "muscles and state-dependent (myo_sds/lattice.py; needs fast_lstm_update)")
+    lattice_alpha: float = setting(1.0, parse=number(low=0), help="weight of Lattice's latent noise (0: action noise only)")
+    lattice_std_reg: float = setting(0.0, parse=number(low=0), help="extra independent action std (Lattice)")
+    lattice_full_std: bool = setting(False, parse=boolean,
+                                     help="one std per noise-matrix entry, not per latent feature (Lattice)")
+    noise_resample_every: int = setting(1, parse=integer(low=1), help="control steps between Lattice noise draws")
+
+
+@dataclass(frozen=True)
+class PpoWarmup:
+    """More gradient work per sample for the run's first ``steps`` env steps: shorter rollouts
+    (more frequent updates), smaller minibatches and/or more epochs while the policy is new,
+    then the run's (and stages') own settings. None: keep the value the run would otherwise use.
+
+    YAML, under ``ppo``: ``warmup: {steps: 150000, n_steps: 16, batch_size: 128, n_epochs: 10}``.
+    """
+
+    steps: int = 0
+    n_steps: int | None = None
+    batch_size: int | None = None
+    n_epochs: int | None = None
+
+    def active(self, step: int) -> bool:
+        return step < self.steps
+
+
+def ppo_warmup(name: str, value: Any) -> PpoWarmup:
+    names = tuple(f.name for f in fields(PpoWarmup))
+    if value is None or value == {}:
+        return PpoWarmup()
+    check_keys(name, value, names)
+    if "steps" not in value:
+        raise ValueError(f"{name}: a warm-up needs steps: how many env steps from the run's start it lasts")
+    return PpoWarmup(**{key: integer(low=0 if key == "steps" else 1)(f"{name}.{key}", v)
+                        for key, v in value.items() if v is not None})
+
+
+@dataclass(frozen=True)
+class PpoConfig:
+    """sb3-contrib RecurrentPPO hyper-parameters; defaults are the 2022 Baoding winner's."""
+
+    learning_rate: LearningRate = setting(2.56e-5, parse=learning_rate, help="a rate, or {start, end, steps}")
+    n_steps: int = setting(128, parse=integer(low=1), help="rollout steps per env between updates")
+    batch_size: int = setting(32, parse=integer(low=1), help="samples per minibatch")
+    n_epochs: int = setting(10, parse=integer(low=1), help="passes over each rollout")
+    gamma: float = setting(0.99, parse=number(low=0, high=1), help="discount")
+    gae_lambda: float = setting(0.9, parse=number(low=0, high=1), help="GAE's lambda")
+    clip_range: float = setting(0.3, parse=number(low=0, strict_low=True), help="PPO's clip range")
+    ent_coef: float = setting(3.6e-6, parse=number(low=0), help="entropy bonus")
+    vf_coef: float = setting(0.84, parse=number(low=0), help="value loss weight")
+    max_grad_norm: float = setting(0.7, parse=number(low=0, strict_low=True), help="gradient norm clip")
+    target_kl: float | None = setting(
+        None, parse=optional(number(low=0, strict_low=True)),
+        help="SB3's early stop: an update ends its epochs at the first minibatch whose approximate KL from the "
+             "rollout's policy exceeds 1.5 x this; null: all n_epochs always run")
+    warmup: PpoWarmup = setting(PpoWarmup(), parse=ppo_warmup, help="{steps, n_steps, batch_size, n_epochs}")
+
+
+@dataclass(frozen=True)
+class NormalizeConfig:
+    """SB3's VecNormalize: running statistics of observations and discounted returns, one
+    instance for the whole run (its statistics carry across stages and are checkpointed)."""
+
+    observations: bool = setting(True, parse=boolean, help="normalize observations")
+    rewards: bool = setting(True, parse=boolean, help="normalize rewards by the discounted return's scale")
+    clip_obs: float = setting(10.0, parse=number(low=0, strict_low=True), help="normalized observations clipped to +-this")
+    clip_reward: float = setting(10.0, parse=number(low=0, strict_low=True), help="normalized rewards likewise")
+
+
+@dataclass(frozen=True)
+class RolloutConfig:
+    """Where rollouts are collected. ``local``: the envs of the training process. ``ray``:
+    ``workers`` Ray actors, each stepping ``envs_per_worker`` envs with a copy of the policy
+    (``n_envs`` is then workers x envs_per_worker); ``address``: the cluster to join (``auto``:
+    the one started with ``ray start``; null: a cluster of this machine only)."""
+
+    backend: str = setting("local", parse=one_of(*ROLLOUT_BACKENDS), help="local | ray")
+    workers: int = setting(2, parse=integer(low=1), help="Ray workers (one CPU each)")
+    envs_per_worker: int | None = setting(None, parse=optional(integer(low=1)), help="null: n_envs / workers")
+    address: str | None = setting(None, parse=optional(text), help="the Ray cluster: auto, an address, or null")
+    max_restarts: int = setting(3, parse=integer(low=0),
+                                help="a worker that dies more often than this in a row stops the run")
