@@ -14,20 +14,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from myo_sds.declare import Parser, describe, one_of, optional, setting  # noqa: F401  (the knobs' helpers)
+from myo_sds.declare import Parser, describe, number, one_of, optional, setting  # noqa: F401  (the knobs' helpers)
 
-
-def to_float(name: str, value: Any) -> float:
-    """A finite float from a number or numeric string, else ``ValueError`` naming the knob."""
-    if isinstance(value, bool):
-        raise ValueError(f"{name}: expected a number, got the boolean {value!r}")
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise ValueError(f"{name}: expected a finite number, got {value!r}")
-    return number
+# A finite float from a number or numeric string, else ``ValueError`` naming the knob.
+to_float: Parser = number()
 
 
 @dataclass(frozen=True)
