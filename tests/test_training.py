@@ -149,7 +149,8 @@ def test_a_resumable_export_continues_the_same_run_elsewhere(tmp_path, capsys):
         "curriculum_state_256_steps.json", "random_state_256_steps.pkl", "rl_model_256_steps.zip",
         "rl_model_vecnormalize_256_steps.pkl"]
     assert not (carried / "episodes.csv").exists() and not (carried / "tb").exists()
-    assert "1 easy" in (carried / "STATUS.txt").read_text()
+    status = (carried / "STATUS.txt").read_text()
+    assert "1 easy" in status and status.startswith(f"{run.name}: ") and str(tmp_path) not in status
     elsewhere = tmp_path / "other_machine" / "run"
     shutil.copytree(carried, elsewhere)
     states = []

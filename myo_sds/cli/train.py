@@ -101,7 +101,10 @@ def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool)
         if resumable:
             target = run.export_resumable(destination, checkpoint)
             # The run's stage table (its newest checkpoint's), with the hours its episode log gives.
-            atomic_write_text(target.path / "STATUS.txt", format_summary(summarize(run.path)) + "\n")
+            # Named by the run's folder name, not this machine's path to it.
+            summary = summarize(run.path)
+            summary.run_dir = run.path.name
+            atomic_write_text(target.path / "STATUS.txt", format_summary(summary) + "\n")
         else:
             target = run.export_model(destination, checkpoint)
             write_model_card(target.path, run.path)
