@@ -23,9 +23,9 @@ from myo_sds.envs.knobs import (
     parse_choice,
     parse_probability,
     parse_range,
-    parse_recorded_start,
     parse_vector_range,
     ranged,
+    recorded_start_setting,
     scalar,
     setting,
     to_float,
@@ -158,12 +158,8 @@ class BaodingKnobs(TaskKnobs):
                            help="how an RSI start places each ball: 'clear' (on its target, then moved the least distance "
                                 "out of the hand), 'target' (on its target, even inside the palm), 'rest' (the target's "
                                 "x, y at the ball's resting height, as the 2022 winner's env)")
-    recorded_start: RecordedStart | None = setting(
-        None, parse=optional(parse_recorded_start),
-        help="null, or {probability, capacity: 1000, every: 4, solved_only: true}: a share of resets starts from a "
-             "whole state (hand, velocities, activations, balls) recorded at a solved step of this env's own earlier "
-             "episodes, the targets placed on the balls (plus start_offset), with the stage's direction and period; "
-             "the bank is per env, bounded, and refills after --resume")
+    recorded_start: RecordedStart | None = recorded_start_setting(
+        "the targets are placed on the balls (plus start_offset), with the stage's direction and period")
     ball_size: Range | None = setting(None, parse=optional(ranged(positive=True)),
                                    help="m, ball radius: null (model's 0.022), a value, or [min, max]")
     ball_mass: Range | None = setting(None, parse=optional(ranged(positive=True)),

@@ -14,10 +14,9 @@ from myo_sds.envs.knobs import (
     RecordedStart,
     TaskKnobs,
     check_complete,
-    optional,
     parse_range,
-    parse_recorded_start,
     ranged,
+    recorded_start_setting,
     scalar,
     setting,
     to_float,
@@ -90,12 +89,8 @@ class DieKnobs(TaskKnobs):
     friction_change: tuple[float, float, float] = setting(
         (0.0, 0.0, 0.0), parse=_friction_change, help="[slide, torsion, roll]: friction = nominal +- U(change) per geom")
     hand_noise: float = setting(0.0, parse=scalar(minimum=0.0), help="rad, uniform +- noise on the 23 hand joints at reset")
-    recorded_start: RecordedStart | None = setting(
-        None, parse=optional(parse_recorded_start),
-        help="null, or {probability, capacity: 1000, every: 4, solved_only: true}: a share of resets starts from a "
-             "whole state (hand, die, velocities, activations) recorded in this env's own earlier episodes, with the "
-             "goal drawn as the stage's knobs say (solved_only: false records unsolved steps too); the bank is per "
-             "env, bounded, and refills after --resume")
+    recorded_start: RecordedStart | None = recorded_start_setting(
+        "the goal is drawn as the stage's knobs say (solved_only: false records unsolved steps too)")
     position_threshold: float = setting(0.025, parse=scalar(positive=True),
                                      help="m, solved when the die is closer than this to the goal ...")
     rotation_threshold: float = setting(0.262, parse=scalar(positive=True),

@@ -158,6 +158,14 @@ class RecordedStart:
     FIELDS: ClassVar[tuple[str, ...]] = ("probability", "capacity", "every", "solved_only")
 
 
+def recorded_start_setting(what: str):
+    """The ``recorded_start`` knob of a task; ``what`` says how its goal is placed on a recorded start."""
+    return setting(None, parse=optional(parse_recorded_start),
+                   help="null, or {probability, capacity: 1000, every: 4, solved_only: true}: a share of resets starts "
+                        "from a whole state (joints, velocities, activations) recorded in this env's own earlier "
+                        f"episodes; {what}; the bank is per env, bounded, and refills after --resume")
+
+
 def parse_recorded_start(name: str, value: Any) -> RecordedStart:
     """A :class:`RecordedStart` from ``{probability: p, capacity: n, every: k, solved_only: bool}``
     (only ``probability`` required)."""
