@@ -194,4 +194,4 @@ SPEC = TaskSpec(
     preset_notes={"p1": "targets start at pi/4, 90 deg behind the balls (MyoSuite 3.0.0)",
                   "p1_2022": "targets start at 3pi/4, on the resting balls (the 2022 phase-1 leaderboard)",
                   "p2": "random start angle (P2)"},
-    hand_joints=N_HAND_JOINTS)
+    hand_joints=N_HAND_JOINTS, start_phase_name="the targets' start phase")

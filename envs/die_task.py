@@ -106,4 +106,6 @@ SPEC = TaskSpec(
     name="die", knobs=DieKnobs, reward_terms=REWARD_TERMS, env_path="myo_sds.envs.die:DieEnv",
     episode_score=solved_on_more_than(SUCCESS_STEPS), gym_name="Die",
     official_ids={"p1": "myoChallengeDieReorientP1-v0", "p2": "myoChallengeDieReorientP2-v0"},
-    hand_joints=N_HAND_JOINTS)
+    hand_joints=N_HAND_JOINTS,
+    # The orientation error the score measures (norm of the Euler-angle differences), at the start.
+    start_phase_name="the goal's angle from the die at the start")

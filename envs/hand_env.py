@@ -152,7 +152,8 @@ class MuscleHandEnv(gym.Env):
         return None
 
     def _episode_start_phase(self) -> float | None:
-        """Where on its path the episode's goal starts, for reports by start phase."""
+        """Where the episode's goal starts, for reports by start phase (the task's
+        ``start_phase_name``); called at reset, after the first observation."""
         return None
 
     def _episode_horizon(self) -> int:
@@ -213,9 +214,10 @@ class MuscleHandEnv(gym.Env):
         task = self.task
         # The observation needs positions only; mj_step computes everything else itself.
         mujoco.mj_kinematics(self.model, self.data)
-        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "length": 0,
+        obs = self._observe().astype(np.float32)
+        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "length": 0, "start_phase": self._episode_start_phase(),
                          "phase_steps": [0] * PHASE_SECTORS, "phase_solved": [0] * PHASE_SECTORS}
-        return self._observe().astype(np.float32), {"task": task}
+        return obs, {"task": task}
 
     def move_hand_joints(self, offsets: np.ndarray) -> np.ndarray:
         """Add ``offsets`` to the first ``len(offsets)`` joint angles right after a reset (start
@@ -299,7 +301,7 @@ class MuscleHandEnv(gym.Env):
             info["episode_result"] = EpisodeResult(
                 solved_steps=episode["solved_steps"], length=episode["length"], horizon=horizon,
                 dropped=bool(terms["done"]), effort=episode["effort_sum"] / episode["length"],
-                direction=self._episode_label(), task=self.TASK_NAME, start_phase=self._episode_start_phase(),
+                direction=self._episode_label(), task=self.TASK_NAME, start_phase=episode["start_phase"],
                 **self._phase_counts(episode))
         return obs, reward, terminated, truncated, info
 

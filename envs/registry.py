@@ -47,6 +47,7 @@ class TaskSpec:
         hand_joints: how many of the first ``qpos`` entries are the hand's joint angles (on our env
             and the official one alike), which ``evaluate.py --start-noise`` moves at reset; 0 for a
             task without them.
+        start_phase_name: what an episode's ``start_phase`` (rad) measures, as reports name it.
     """
 
     name: str
@@ -59,6 +60,7 @@ class TaskSpec:
     official_setup: Mapping[str, Callable[[Any], None]] = field(default_factory=dict)
     preset_notes: Mapping[str, str] = field(default_factory=dict)
     hand_joints: int = 0
+    start_phase_name: str = "the start phase"
 
     def env_class(self) -> type:
         module, name = self.env_path.split(":")

@@ -190,3 +190,30 @@ def test_recorded_starts_restore_the_hand_and_die_of_earlier_episodes_with_a_goa
     # The goal is drawn first, as without recorded starts (draw order: envs/die.py).
     _, expected = reference.reset(seed=11)
     assert info["task"] == expected["task"]
+
+
+def test_episodes_report_the_goal_angle_at_their_start():
+    # The die rests at Euler angles (0, 0, 0), so the start's orientation error is the goal's angles' norm.
+    env = DieEnv("p1")
+    task = {**env.reset(seed=0)[1]["task"].to_dict(), "goal_euler": [0.3, -0.2, 1.0]}
+    env.reset(seed=2, options={"task": task})
+    rng = np.random.default_rng(0)
+    terminated = truncated = False
+    while not (terminated or truncated):
+        _, _, terminated, truncated, info = env.step(rng.uniform(-1, 1, 39).astype(np.float32))
+    # The episode keeps its start's error, not its end's (the die has moved since).
+    assert info["episode_result"].start_phase == pytest.approx(np.sqrt(0.3**2 + 0.2**2 + 1.0**2))
+    assert -info["rot_dist"] != pytest.approx(np.sqrt(1.13))
+    # A recorded start turns the die: the error is measured from where the restored die points.
+    recorded = DieEnv("p1", recorded_start={"probability": 1.0, "every": 1, "solved_only": False, "capacity": 5})
+    recorded.reset(seed=3)
+    for _ in range(10):
+        recorded.step(rng.uniform(-1, 1, 39).astype(np.float32))
+    recorded.reset(seed=4)
+    assert recorded.recorded_start
+    die_euler = mat_to_euler(recorded.data.site_xmat[recorded.model.site("object_o").id].reshape(3, 3))
+    expected = np.linalg.norm(np.asarray(recorded.task.goal_euler) - die_euler)
+    terminated = truncated = False
+    while not (terminated or truncated):
+        _, _, terminated, truncated, info = recorded.step(rng.uniform(-1, 1, 39).astype(np.float32))
+    assert info["episode_result"].start_phase == pytest.approx(expected) and expected > 0

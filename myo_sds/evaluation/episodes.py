@@ -75,6 +75,7 @@ class EvaluationReport:
             "mean_length": float(np.mean([e.length for e in self.episodes])) if self.episodes else math.nan,
             "per_direction": per_direction,
             "per_start_phase": per_start_phase(self.episodes),
+            "per_start_phase_of": TASK_SPECS[self.env.task].start_phase_name,
             "per_target_phase": per_target_phase(self.episodes),
             "per_episode": [e.to_dict() for e in self.episodes],
         }

@@ -13,6 +13,7 @@ import numpy as np
 
 from myo_sds.curricula.advancement import episode_metric
 from myo_sds.curricula.schema import load_curriculum
+from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.evaluation.episodes import per_start_phase
 from myo_sds.run_folder import EpisodeRecord, RunFolder
 
@@ -33,8 +34,8 @@ class StageSummary:
     window: int | None
     measured: float | None  # at the transition, or now for the current stage
     trend: list[tuple[int, float]] = field(default_factory=list)  # (run env step, measured) in the current stage
-    # The current stage's latest episodes by the targets' start phase: a stage mean that stops
-    # rising often hides sectors where the balls are always dropped.
+    # The current stage's latest episodes by start phase (Baoding: the targets'; the die: the goal's
+    # angle): a stage mean that stops rising often hides sectors where the task always fails.
     by_start_phase: dict[str, dict[str, Any]] = field(default_factory=dict)
     # The stage's periodic evaluations (``evaluate`` in the curriculum): best and last mean score,
     # the step of the best, and the step of the policy handed to the next stage (None: its last).
@@ -57,6 +58,7 @@ class RunSummary:
     # The newest saved policy's action std over the 39 muscles: (mean, min, max). A std that has
     # collapsed (the 2022 winner's ended at a mean of 0.116, min 0.086) no longer explores.
     action_std: tuple[float, float, float] | None = None
+    start_phase_name: str = "the start phase"  # what the episodes' start phase measures (the task's)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -108,7 +110,7 @@ def summarize(run_dir: str | Path) -> RunSummary:
     # An exported model (no checkpoints of its own) is a snapshot: its file times say nothing.
     saved_at = folder.state_file.stat().st_mtime if folder.checkpoint_dir.is_dir() else None
     return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages, saved_at,
-                      _action_std(folder))
+                      _action_std(folder), TASK_SPECS[curriculum.task].start_phase_name)
 
 
 def _action_std(folder: RunFolder) -> tuple[float, float, float] | None:
@@ -185,7 +187,7 @@ def format_summary(summary: RunSummary, now: float | None = None) -> str:
     for s in summary.stages:
         if s.by_start_phase:
             n = sum(sector["episodes"] for sector in s.by_start_phase.values())
-            lines.append(f"stage {s.index}, its last {n:,} episodes by the targets' start phase:")
+            lines.append(f"stage {s.index}, its last {n:,} episodes by {summary.start_phase_name}:")
             lines.extend(_sector_table(s.by_start_phase))
     return "\n".join(lines)
 
