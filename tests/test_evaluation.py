@@ -375,3 +375,37 @@ def test_the_model_card_gives_the_scores_its_evaluation_json_records(tiny_run, t
     for report in reports:
         s = report.summary()
         assert f"| `p1_2022` | {s['start_noise']:g} | 2 | {s['score']:.3f} | - |" in card
+
+
+def test_runs_compared_by_env_steps_and_hours_in_one_figure(run_dir, tmp_path):
+    import csv
+    import shutil
+
+    from myo_sds.cli.evaluate import _run_comparison
+
+    # A second run: the same episodes, logged as if it had trained at half the speed.
+    slower = tmp_path / "slower"
+    shutil.copytree(run_dir, slower)
+    with (slower / "episodes.csv").open(newline="") as file:
+        rows = list(csv.DictReader(file))
+    for row in rows:
+        row["wall_s"] = str(2 * float(row["wall_s"]))
+    with (slower / "episodes.csv").open("w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+    curves = ev.plot_run_comparison([run_dir, slower], tmp_path / "compared.png", window=3)
+    steps, hours, score = curves["slower"]
+    scores = [float(r["score"]) for r in rows]
+    expected = [np.mean(scores[max(0, i - 2):i + 1]) for i in range(len(scores))]  # the last 3 episodes
+    np.testing.assert_allclose(score, expected)
+    np.testing.assert_allclose(hours, [float(r["wall_s"]) / 3600 for r in rows])
+    np.testing.assert_allclose(curves[run_dir.name][1] * 2, hours)
+    assert list(steps) == [int(r["step"]) for r in rows] and len(rows) > 3
+    assert (tmp_path / "compared.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    refs = [ev.resolve_checkpoint(folder) for folder in (run_dir, slower, run_dir)]
+    assert _run_comparison(ev, refs, tmp_path / "plots").endswith("(2 runs by env steps and by hours)")
+    assert (tmp_path / "plots" / "learning_curves_compared.png").is_file()
+    assert "needs two or more run folders" in _run_comparison(ev, refs[:1], tmp_path / "plots")

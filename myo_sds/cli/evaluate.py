@@ -80,6 +80,19 @@ def _learning_curve(ev, ref, folder: Path) -> str:
     return f"wrote {path}"
 
 
+def _run_comparison(ev, refs, folder: Path) -> str:
+    """With two or more run folders that logged episodes, their training curves in one figure."""
+    from myo_sds.run_folder import RunFolder
+
+    runs = list(dict.fromkeys(ref.run_dir for ref in refs if ref.run_dir is not None
+                              and RunFolder(ref.run_dir).episodes_file.is_file()))
+    if len(runs) < 2:
+        return "no run comparison: it needs two or more run folders with training episodes"
+    path = folder / "learning_curves_compared.png"
+    ev.plot_run_comparison(runs, path)
+    return f"wrote {path} ({len(runs)} runs by env steps and by hours)"
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     from myo_sds import evaluation as ev
@@ -118,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"wrote {args.plots / 'score_histogram.png'}")
             for ref in refs:
                 print(_learning_curve(ev, ref, args.plots))
+            print(_run_comparison(ev, refs, args.plots))
         if args.video:
             # Episodes with start noise differ from each other; without it a fixed start repeats one.
             shown = next((r for r in reports if r.env.start_noise and not r.env.official), reports[0])

@@ -22,6 +22,7 @@ from myo_sds.evaluation.episodes import (
 )
 from myo_sds.evaluation.plots import (
     plot_learning_curve,
+    plot_run_comparison,
     plot_score_histogram,
     trailing_mean,
 )
@@ -31,6 +32,6 @@ from myo_sds.evaluation.video import chosen_episodes, record_video
 
 __all__ = ["CheckpointRef", "EnvChoice", "EvaluationError", "EvaluationReport", "LoadedPolicy",
            "choose_env", "chosen_episodes", "evaluate", "format_table", "load_policy", "per_start_phase",
-           "per_target_phase", "phase_sector", "plot_learning_curve", "plot_score_histogram", "record_video", "resolve_checkpoint",
+           "per_target_phase", "phase_sector", "plot_learning_curve", "plot_run_comparison", "plot_score_histogram", "record_video", "resolve_checkpoint",
            "run_episode", "run_task", "sector_name", "trailing_mean", "RunSummary", "StageSummary", "format_summary",
            "summarize"]

@@ -91,6 +91,54 @@ def plot_learning_curve(run_dir: Path, path: Path, window: int | None = None) ->
     plt.close(fig)
 
 
+def plot_run_comparison(run_dirs: Sequence[Path], path: Path,
+                        window: int | None = None) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Training score of several runs in one figure, against env steps (left) and hours of
+    training (right): what a setting costs is judged on both. Each stage a run passed or left is a
+    dot on its curve. The same trailing ``window`` for every run (default: 50 episodes, more for
+    long runs, 1/200 of the shortest log). Returns each run's plotted (env steps, hours, score)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = [RunFolder(run_dir) for run_dir in run_dirs]
+    logs = {}
+    for run in runs:
+        rows = run.read_episodes()
+        if not rows:
+            raise EvaluationError(f"{run.path}: no training episodes logged yet to compare")
+        logs[run.path.name] = (run, rows)
+    window = window or max(50, min(len(rows) for _, rows in logs.values()) // 200)
+    fig, (by_steps, by_hours) = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
+    curves = {}
+    for index, (name, (run, rows)) in enumerate(logs.items()):
+        steps = np.array([r.step for r in rows])
+        hours = np.array([r.wall_s for r in rows]) / 3600.0
+        score = trailing_mean(np.array([r.score for r in rows]), window)
+        curves[name] = (steps, hours, score)
+        color = plt.get_cmap("tab10")(index % 10)
+        by_steps.plot(steps, score, color=color, label=name)
+        by_hours.plot(hours, score, color=color, label=name)
+        state = run.read_state()
+        for entry in state.history if state is not None else []:
+            at = min(int(np.searchsorted(steps, entry.at_step)), len(steps) - 1)
+            by_steps.plot(steps[at], score[at], "o", color=color, markersize=5)
+            by_hours.plot(hours[at], score[at], "o", color=color, markersize=5)
+            by_steps.annotate(f" {entry.stage} {entry.decision}", (steps[at], score[at]), fontsize=7, color=color)
+    by_steps.set_xlabel("env steps")
+    by_hours.set_xlabel("hours of training")
+    by_steps.set_ylabel(f"score of training episodes\n(mean of the last {window})")
+    by_steps.set_ylim(0, 1.0)
+    by_hours.legend(loc="upper left", fontsize=8, frameon=False)
+    fig.suptitle("runs compared (dots: a stage passed or left)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return curves
+
+
 def _stage_thresholds(run: RunFolder, history: list[Transition], last_step: int) -> list[tuple[int, int, float]]:
     """``(first step, last step, threshold)`` of each stage the run has been in that has one."""
     from myo_sds.curricula.schema import ConfigError, load_curriculum
