@@ -169,6 +169,20 @@ def test_a_resumable_export_continues_the_same_run_elsewhere(tmp_path, capsys):
     assert after == [(e.step, e.score, e.length) for e in RunFolder(elsewhere).read_episodes()] and after
 
 
+def test_resumable_exports_under_experiments_are_tracked_and_run_folders_are_not():
+    """A resumable export kept in experiments/runs/ must reach the repository; the default run
+    folders (runs/ at the top) must not."""
+    if not (REPO / ".git").exists():
+        pytest.skip("not a git checkout")
+
+    def ignored(path: str) -> bool:
+        return subprocess.run(["git", "check-ignore", "-q", path], cwd=REPO).returncode == 0
+
+    assert not ignored("experiments/runs/a-s0/checkpoints/rl_model_256_steps.zip")
+    assert not ignored("experiments/runs/a-s0/curriculum_state.json")
+    assert ignored("runs/quickstart-20261205-120000-s0/episodes.csv")
+
+
 def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     config = write_config(tmp_path, total=256)
     run = tmp_path / "run"
