@@ -59,6 +59,7 @@ def test_evaluation_reports_official_metrics(run_dir):
     table = ev.format_table([report])
     for name, sector in sectors.items():
         assert f"score, start {name} deg" in table and f"(n={sector['episodes']}, drops" in table
+    assert "start A-B deg: the targets' start phase" in table
     # A hold stage: each episode's targets stay in its start sector, so by target phase the
     # steps and solved steps are those of the episodes that started there.
     for name, sector in summary["per_target_phase"].items():
@@ -239,6 +240,10 @@ def test_die_checkpoint_scores_the_same_on_our_env_and_official(tmp_path):
         [(e.solved_steps, e.length, e.dropped) for e in official.episodes]
     summary = ours.summary()
     assert summary["score"] == np.mean([e["solved_steps"] > 5 for e in summary["per_episode"]])
+    # Die episodes are split by how far the goal starts from the die (P2: up to pi per axis).
+    assert sum(s["episodes"] for s in summary["per_start_phase"].values()) == 4
+    assert summary["per_start_phase_of"] == "the goal's angle from the die at the start"
+    assert "start A-B deg: the goal's angle from the die at the start" in ev.format_table([ours, official])
 
 
 def test_run_summary_gives_each_stage_its_steps_time_and_measured_value(tiny_run, tmp_path, capsys):

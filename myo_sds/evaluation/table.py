@@ -72,6 +72,10 @@ def format_table(reports: Sequence[EvaluationReport], width: int = TABLE_WIDTH) 
             lines.append("")
         lines.append(f"== {label}")
         lines += _block([r.env.label for r in mine], _rows(summaries), width)
-    starts = {s["env"]: s["start"] for r in reports for s in [r.summary()] if s.get("start")}
+    summaries = [r.summary() for r in reports]
+    starts = {s["env"]: s["start"] for s in summaries if s.get("start")}
     lines += [""] + [f"{env}: {note}" for env, note in starts.items()]
+    # What "start A-B deg" measures differs by task: say it when the table splits by it.
+    measures = dict.fromkeys(s["per_start_phase_of"] for s in summaries if s["per_start_phase_of"] and s["per_start_phase"])
+    lines += [f"start A-B deg: {', '.join(measures)}"] if measures else []
     return "\n".join(lines)
