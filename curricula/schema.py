@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from myo_sds.curricula.yaml_reader import ConfigError, YamlReader, load_yaml
+from myo_sds.curricula.yaml_reader import ConfigError, YamlReader
 from myo_sds.declare import integer, number, one_of, optional, read_settings, setting, text
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
@@ -184,16 +184,19 @@ def load_curriculum(path: str | Path) -> Curriculum:
     """
     path = Path(path)
     reader = YamlReader(path)
-    raw = reader.mapping("", load_yaml(path, "curriculum"), ("name", "task", "defaults", "stages"))
+    raw = reader.mapping("", reader.read_with_bases("curriculum"), ("name", "task", "defaults", "stages"))
     if not raw:
         raise reader.error("", "the curriculum file is empty")
     task = reader.read("task", raw.get("task", "baoding"), one_of(*TASK_SPECS))
-    name = reader.read("name", raw.get("name", path.stem), text)
+    # A variant is named by its own file, not by the base it inherits from.
+    name = reader.read("name", raw["name"] if "name" in raw and "name" not in reader.origins else path.stem, text)
     defaults = reader.mapping("defaults", raw.get("defaults"), ("preset", *TASK_SPECS[task].knobs.help()))
     stages_raw = raw.get("stages")
     if not isinstance(stages_raw, list) or not stages_raw:
         raise reader.error("stages", "expected a non-empty list of stages")
     stages, seen = [], set()
+    # An error in a stage names the file that wrote the stage list (a base's, when inherited).
+    reader = YamlReader(reader.origins["stages"]) if "stages" in reader.origins else reader
     for index, stage_raw in enumerate(stages_raw):
         key = stage_label(index)  # stages count from 1, as on the console
         stage_raw = reader.mapping(key, stage_raw, ("name", "env", "advance", "ppo", "evaluate"))

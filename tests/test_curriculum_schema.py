@@ -72,6 +72,27 @@ def test_a_config_inherits_its_base_and_overrides_key_by_key(tmp_path):
         load_run_config(tmp_path / "exp" / "orphan.yaml")
 
 
+def test_a_curriculum_inherits_its_base_defaults_key_by_key_and_its_stages_unless_written(tmp_path):
+    write(tmp_path, GOOD_CURRICULUM.replace("rsi_probability: 1.0}", "rsi_probability: 1.0, "
+                                            "reward_weights: {pos_dist_1: 1.0, solved: 5.0}}"), "tiny.yaml")
+    variant = load_curriculum(write(tmp_path, "base: tiny.yaml\ndefaults: {reward_weights: {solved: 2.0}}\n",
+                                    "tiny_variant.yaml"))
+    base = load_curriculum(tmp_path / "tiny.yaml")
+    # Named by its own file; the base's stages, each with the one weight changed.
+    assert (variant.name, base.name) == ("tiny_variant", "tiny")
+    assert [s.name for s in variant.stages] == ["a", "b"] and variant.stages[1].ppo == base.stages[1].ppo
+    for mine, theirs in zip(variant.stages, base.stages):
+        assert dict(mine.distribution.reward_weights) == {**theirs.distribution.reward_weights, "solved": 2.0}
+        assert dict(theirs.distribution.reward_weights)["solved"] == 5.0
+        assert mine.distribution.solved_radius == theirs.distribution.solved_radius
+    # Stages written in the variant replace the base's list; a bad value the base wrote names the base.
+    one = load_curriculum(write(tmp_path, "base: tiny.yaml\nstages:\n  - name: only\n", "one_stage.yaml"))
+    assert [s.name for s in one.stages] == ["only"] and one.task == "baoding"
+    write(tmp_path, GOOD_CURRICULUM.replace("solved_radius: 0.03", "solved_radius: -1"), "bad_base.yaml")
+    with pytest.raises(ConfigError, match=re.escape(f"{(tmp_path / 'bad_base.yaml').resolve()}: stage 1")):
+        load_curriculum(write(tmp_path, "base: bad_base.yaml\nname: on_bad\n", "on_bad.yaml"))
+
+
 def test_good_curriculum_is_parsed_with_defaults_merged(tmp_path):
     curriculum = load_curriculum(write(tmp_path, GOOD_CURRICULUM))
     a, b = curriculum.stages
