@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from myo_sds.curricula.yaml_reader import ConfigError, YamlReader
+from myo_sds.curricula.yaml_reader import ConfigError, YamlReader, merge_bases
 from myo_sds.declare import integer, number, one_of, optional, read_settings, setting, text
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
@@ -106,6 +106,18 @@ class Curriculum:
     task: str
     stages: tuple[Stage, ...]
     path: Path | None = None
+
+    def file_text(self) -> str:
+        """The curriculum as one self-contained file, for a run folder's own copy: the file as
+        written (comments kept), or, when it inherits with ``base:``, the merged mapping."""
+        text = self.path.read_text()
+        merged, origins = merge_bases(self.path, "curriculum")
+        if not origins:
+            return text
+        merged["name"] = self.name
+        return (f"# {self.path.name} merged with its base files (base:): the curriculum this run follows\n"
+                + yaml.safe_dump({key: merged[key] for key in ("name", "task", "defaults", "stages") if key in merged},
+                                 sort_keys=False))
 
     def stage_index(self, name: str) -> int:
         for index, stage in enumerate(self.stages):

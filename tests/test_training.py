@@ -169,6 +169,29 @@ def test_a_resumable_export_continues_the_same_run_elsewhere(tmp_path, capsys):
     assert after == [(e.step, e.score, e.length) for e in RunFolder(elsewhere).read_episodes()] and after
 
 
+def test_a_run_of_a_curriculum_with_a_base_keeps_the_merged_curriculum_and_resumes_elsewhere(tmp_path):
+    import shutil
+
+    (tmp_path / "base_curriculum.yaml").write_text(CURRICULUM)
+    variant = "base: base_curriculum.yaml\ndefaults: {reward_weights: {pos_dist_1: 1.0, solved: 3.0}}\n"
+    config = write_config(tmp_path, total=512, curriculum=variant)
+    run = tmp_path / "run"
+    trainer = CurriculumTrainer.start(config, run_dir=run, progress=False)
+    trainer.run(max_wall_s=1e-9)
+    trainer.close()
+    copy = yaml.safe_load((run / "curriculum.yaml").read_text())
+    assert "base" not in copy and copy["name"] == "curriculum"  # named after the variant's file
+    assert copy["defaults"]["reward_weights"] == {"pos_dist_1": 1.0, "solved": 3.0}
+    assert [stage["name"] for stage in copy["stages"]] == ["easy", "hard"]
+    # Moved away from the base file, the run still resumes: its copy stands alone.
+    elsewhere = tmp_path / "elsewhere" / "run"
+    shutil.copytree(run, elsewhere)
+    (tmp_path / "base_curriculum.yaml").unlink()
+    resumed = CurriculumTrainer.resume(elsewhere, progress=False)
+    assert resumed.config.curriculum.stages[0].distribution.reward_weights["solved"] == 3.0
+    resumed.close()
+
+
 def test_resumable_exports_under_experiments_are_tracked_and_run_folders_are_not():
     """A resumable export kept in experiments/runs/ must reach the repository; the default run
     folders (runs/ at the top) must not."""

@@ -127,7 +127,7 @@ class CurriculumTrainer:
             folder = RunFolder.claim(Path(run_dir), overwrite)
         # The run folder is self-contained: its config points at its own copy of the curriculum.
         resolved = {**config.source, "curriculum": folder.curriculum_file.name, "seed": config.seed}
-        folder.write_provenance(yaml.safe_dump(resolved, sort_keys=False), config.curriculum_path.read_text())
+        folder.write_provenance(yaml.safe_dump(resolved, sort_keys=False), config.curriculum.file_text())
         set_random_seed(config.seed)
         state = CurriculumState()
         stage, settings = config.curriculum.stages[0], ppo_settings_at(config, 0, state.stage_starts(), 0)
