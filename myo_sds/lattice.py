@@ -31,7 +31,47 @@ import math
 import torch as th
 from stable_baselines3.common.distributions import StateDependentNoiseDistribution
 from torch import nn
-from torch.distributions import MultivariateNormal
+
+LOG_2PI = math.log(2 * math.pi)
+
+
+class _InverseAndHalfLogDet(th.autograd.Function):
+    """``(Sigma^-1, 0.5 log det Sigma)`` of a batch of covariance matrices from one Cholesky
+    factor, with the closed-form gradients (d Sigma^-1 = -Sigma^-1 dSigma Sigma^-1, d 0.5 log det =
+    0.5 Sigma^-1): the same values and gradients as differentiating through the factor, without
+    its backward pass of batched triangular solves (most of a Lattice minibatch's time)."""
+
+    @staticmethod
+    def forward(ctx, sigma: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        factor = th.linalg.cholesky(sigma)
+        inverse = th.cholesky_inverse(factor)
+        ctx.save_for_backward(inverse)
+        return inverse, factor.diagonal(dim1=-2, dim2=-1).log().sum(-1)
+
+    @staticmethod
+    def backward(ctx, grad_inverse: th.Tensor, grad_half_logdet: th.Tensor) -> th.Tensor:
+        (inverse,) = ctx.saved_tensors
+        grad = 0.5 * grad_half_logdet[..., None, None] * inverse
+        if grad_inverse is not None:
+            grad = grad - inverse @ grad_inverse @ inverse
+        return grad
+
+
+class MultivariateGaussian:
+    """N(mean, covariance_matrix) for a batch: the log-probability and entropy Lattice's loss
+    needs (as ``torch.distributions.MultivariateNormal``'s), from one Cholesky factor per sample."""
+
+    def __init__(self, mean: th.Tensor, covariance_matrix: th.Tensor) -> None:
+        self.mean, self.covariance_matrix = mean, covariance_matrix
+        self._inverse, self._half_logdet = _InverseAndHalfLogDet.apply(covariance_matrix)
+
+    def log_prob(self, value: th.Tensor) -> th.Tensor:
+        diff = value - self.mean
+        mahalanobis = (diff.unsqueeze(-2) @ self._inverse @ diff.unsqueeze(-1))[..., 0, 0]
+        return -0.5 * (mahalanobis + self.mean.shape[-1] * LOG_2PI) - self._half_logdet
+
+    def entropy(self) -> th.Tensor:
+        return 0.5 * self.mean.shape[-1] * (1.0 + LOG_2PI) + self._half_logdet
 
 
 class LatticeNoise(StateDependentNoiseDistribution):
@@ -95,8 +135,7 @@ class LatticeNoise(StateDependentNoiseDistribution):
 
     def proba_distribution(self, mean_actions: th.Tensor, log_std: th.Tensor, latent_sde: th.Tensor) -> LatticeNoise:
         self._latent = latent_sde.detach()
-        self.distribution = MultivariateNormal(mean_actions, covariance_matrix=self.covariance(log_std, latent_sde),
-                                               validate_args=False)
+        self.distribution = MultivariateGaussian(mean_actions, self.covariance(log_std, latent_sde))
         return self
 
     def log_prob(self, actions: th.Tensor) -> th.Tensor:

@@ -143,3 +143,31 @@ def test_the_shared_latent_variance_shortcut_computes_the_general_covariance():
     # The per-feature stds spelled out as a full matrix: each row's two values repeated.
     full = th.cat([log_std[:, :1].expand(8, 8), log_std[:, 1:].expand(8, 5)], dim=1)
     assert th.allclose(shared.covariance(log_std, x), general.covariance(full, x), atol=1e-6)
+
+
+def test_log_probability_entropy_and_their_gradients_equal_torch_s_multivariate_normal():
+    from torch.distributions import MultivariateNormal
+
+    from myo_sds.lattice import _InverseAndHalfLogDet
+
+    th.manual_seed(2)
+    dist = LatticeNoise(39, alpha=1.0)
+    net, log_std = dist.proba_distribution_net(latent_dim=128, log_std_init=-1.0)
+    features, latent, actions = th.randn(64, 128, requires_grad=True), th.randn(64, 128), th.randn(64, 39)
+    losses = []
+    for reference in (False, True):
+        dist.proba_distribution(net(features), log_std, latent)
+        if reference:
+            dist.distribution = MultivariateNormal(dist.distribution.mean, dist.distribution.covariance_matrix)
+        log_prob, entropy = dist.log_prob(actions), dist.entropy()
+        params = (features, log_std, net.weight, net.bias)
+        grads = th.autograd.grad(log_prob.sum() + 0.01 * entropy.sum(), params)
+        losses.append((log_prob, entropy, grads))
+    (ours, ours_entropy, ours_grads), (torch_s, torch_entropy, torch_grads) = losses
+    assert th.allclose(ours, torch_s, rtol=1e-5, atol=1e-3) and th.allclose(ours_entropy, torch_entropy, atol=1e-4)
+    for mine, theirs in zip(ours_grads, torch_grads):
+        assert th.allclose(mine, theirs, rtol=1e-3, atol=1e-3 * theirs.abs().max().item())
+    # The closed-form backward, against finite differences in float64.
+    x = th.randn(3, 5, 5, dtype=th.float64)
+    sigma = (x @ x.transpose(1, 2) + th.eye(5, dtype=th.float64)).requires_grad_()
+    assert th.autograd.gradcheck(lambda s: _InverseAndHalfLogDet.apply(0.5 * (s + s.transpose(1, 2))), (sigma,))
