@@ -405,3 +405,27 @@ def test_a_run_folder_that_holds_anything_is_refused_unless_overwritten(tmp_path
     folder.remove()
     assert not taken.exists()
     assert RunFolder.claim(tmp_path / "new" / "run").path.is_dir()
+
+
+@pytest.mark.parametrize("exploration", ["gaussian", "lattice"])
+def test_the_update_recomputes_the_rollout_s_log_probabilities_before_any_step(tmp_path, exploration):
+    """PPO's ratio starts at exactly 1: the update's minibatches (their LSTM states, episode
+    starts and padding) replay what the rollout computed. A mismatch would clip samples for nothing."""
+    from myo_sds.sb3_internals import start_training
+
+    trainer = CurriculumTrainer.start(write_config(tmp_path, total=100_000), (f"policy.exploration={exploration}",),
+                                      run_dir=tmp_path / "run", progress=False)
+    model = trainer.model
+    start_training(model, 100_000, trainer.episode_callback)
+    assert trainer.rollouts.collect(model, trainer.episode_callback)
+    model.policy.set_training_mode(False)
+    compared = 0
+    with torch.no_grad():
+        for batch in model.rollout_buffer.get(model.batch_size):
+            mask = batch.mask > 1e-8
+            _, log_prob, _ = model.policy.evaluate_actions(batch.observations, batch.actions, batch.lstm_states,
+                                                           batch.episode_starts)
+            torch.testing.assert_close(log_prob[mask], batch.old_log_prob[mask], rtol=1e-6, atol=1e-5)  # float32 roundoff
+            compared += int(mask.sum())
+    assert compared == model.n_steps * model.n_envs
+    trainer.close()
