@@ -59,13 +59,13 @@ def main() -> None:
     data = np.array(rows, dtype=float)
     print(f"{len(rows)} episodes of {ref.label} on {choice.label}: score {data[:, 6].mean():.3f}, "
           f"dropped {data[:, 5].mean():.0%}")
-    print(f"{'start error, deg':>17} {'episodes':>8} {'score':>6} {'smallest error':>14} {'end error':>9} "
+    print(f"{'start error, deg':>17} {'episodes':>8} {'score':>6} {'mean start':>10} {'smallest error':>14} {'end error':>9} "
           f"{'end position, cm':>16} {'solved steps':>12}")
     bins = np.floor(np.degrees(data[:, 0]) / BIN_DEG).astype(int)
     for k in sorted(set(bins.tolist())):
         group = data[bins == k]
         print(f"{f'{k * BIN_DEG}-{(k + 1) * BIN_DEG}':>17} {len(group):>8} {group[:, 6].mean():>6.2f} "
-              f"{math.degrees(group[:, 1].mean()):>12.1f}dg {math.degrees(group[:, 2].mean()):>7.1f}dg "
+              f"{math.degrees(group[:, 0].mean()):>8.1f}dg {math.degrees(group[:, 1].mean()):>12.1f}dg {math.degrees(group[:, 2].mean()):>7.1f}dg "
               f"{100 * group[:, 3].mean():>16.2f} {group[:, 4].mean():>12.1f}")
 
 
