@@ -56,6 +56,8 @@ def test_evaluation_reports_official_metrics(run_dir):
         inside = [e for e in summary["per_episode"] if low <= np.degrees(e["start_phase"]) < high]
         assert sector["episodes"] == len(inside)
         assert sector["score"] == pytest.approx(np.mean([e["solved_steps"] / 200 for e in inside]))
+        drops = [e["length"] for e in inside if e["dropped"]]
+        assert sector["drop_step"] == (pytest.approx(np.mean(drops)) if drops else None)
     table = ev.format_table([report])
     for name, sector in sectors.items():
         assert f"score, start {name} deg" in table and f"(n={sector['episodes']}, drops" in table

@@ -33,19 +33,31 @@ def test_confidence_interval():
 def test_scores_by_start_phase_sector():
     from myo_sds.evaluation import per_start_phase
 
-    def episode(degrees, solved, dropped=False):
-        return EpisodeResult(solved, 200, 200, dropped, 0.1, "hold", start_phase=math.radians(degrees))
+    def episode(degrees, solved, dropped=False, length=200):
+        return EpisodeResult(solved, length, 200, dropped, 0.1, "hold", start_phase=math.radians(degrees))
 
-    episodes = [episode(10, 100), episode(44.9, 50, True), episode(183, 20, True), episode(359.9, 200),
+    episodes = [episode(10, 100), episode(44.9, 50, True, 60), episode(183, 20, True, 35), episode(359.9, 200),
                 EpisodeResult(10, 200, 200, False, 0.1, "hold", start_phase=2 * math.pi)]  # rounds up to 2 pi
     sectors = per_start_phase(episodes)
     assert list(sectors) == ["0-45", "180-225", "315-360"]
-    assert sectors["0-45"] == {"episodes": 2, "score": pytest.approx(0.375), "drop_rate": 0.5}
-    assert sectors["180-225"] == {"episodes": 1, "score": pytest.approx(0.1), "drop_rate": 1.0}
-    assert sectors["315-360"] == {"episodes": 2, "score": pytest.approx(0.525), "drop_rate": 0.0}
+    assert sectors["0-45"] == {"episodes": 2, "score": pytest.approx(0.375), "drop_rate": 0.5, "drop_step": 60.0}
+    assert sectors["180-225"] == {"episodes": 1, "score": pytest.approx(0.1), "drop_rate": 1.0, "drop_step": 35.0}
+    assert sectors["315-360"] == {"episodes": 2, "score": pytest.approx(0.525), "drop_rate": 0.0, "drop_step": None}
     # One start phase for all episodes (P1's fixed start), or none recorded: no breakdown.
     assert per_start_phase([episode(45, 10), episode(45, 20)]) == {}
     assert per_start_phase([EpisodeResult(10, 200, 200, False, 0.1)]) == {}
+
+
+def test_the_status_table_says_when_each_sector_drops_the_balls():
+    from myo_sds.evaluation.summary import RunSummary, StageSummary, format_summary
+
+    sectors = {"0-45": {"episodes": 3, "score": 0.1, "drop_rate": 2 / 3, "drop_step": 61.4},
+               "45-90": {"episodes": 2, "score": 0.7, "drop_rate": 0.0, "drop_step": None}}
+    stage = StageSummary(1, "hold", "current", 1000, 10.0, 5, "score", 0.55, 500, 0.34, by_start_phase=sectors)
+    text = format_summary(RunSummary("run", "running", 1000, 10.0, [stage]), now=0.0)
+    rows = {line.split()[0]: line.split()[1:] for line in text.splitlines() if line.startswith("  ")}
+    assert rows["degrees"] == ["0-45", "45-90"] and rows["dropped"] == ["67%", "0%"]
+    assert rows["at"] == ["step", "61", "-"]  # the mean step of the drops, rounded; none dropped: "-"
 
 
 def test_solved_fraction_by_target_phase_sums_over_episodes():

@@ -92,8 +92,8 @@ def score_spread(scores: Sequence[float]) -> dict[str, float]:
 
 
 def per_start_phase(episodes: Sequence[EpisodeResult | EpisodeRecord]) -> dict[str, dict[str, Any]]:
-    """Score and drop rate by the goal's start phase, in 45-degree sectors ("0-45", ...), of
-    evaluated episodes or of a run's logged training episodes.
+    """Score, drop rate and the mean step of the drops by the goal's start phase, in 45-degree
+    sectors ("0-45", ...), of evaluated episodes or of a run's logged training episodes.
 
     Empty unless the start phase varies between episodes (stages with random phases, P2's
     random start offsets): a policy's average can hide sectors where it always drops the balls.
@@ -105,8 +105,15 @@ def per_start_phase(episodes: Sequence[EpisodeResult | EpisodeRecord]) -> dict[s
     for e in phased:
         sectors.setdefault(phase_sector(e.start_phase), []).append(e)
     return {sector_name(k): {"episodes": len(members), "score": official_score(members),
-                             "drop_rate": drop_rate(members)}
+                             "drop_rate": drop_rate(members), "drop_step": _mean_drop_step(members)}
             for k, members in sorted(sectors.items())}
+
+
+def _mean_drop_step(episodes: Sequence[EpisodeResult | EpisodeRecord]) -> float | None:
+    """When the dropped episodes ended, on average (None without drops): a sector whose drops
+    come early loses the balls to the start, one whose drops come late to what follows."""
+    lengths = [e.length for e in episodes if e.dropped]
+    return float(np.mean(lengths)) if lengths else None
 
 
 def per_target_phase(episodes: Sequence[EpisodeResult]) -> dict[str, dict[str, Any]]:

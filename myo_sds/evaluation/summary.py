@@ -192,10 +192,16 @@ def format_summary(summary: RunSummary, now: float | None = None) -> str:
     return "\n".join(lines)
 
 
+def _drop_step(sector: dict[str, Any]) -> str:
+    step = sector.get("drop_step")  # summaries written before it was recorded lack it
+    return "-" if step is None else f"{step:.0f}"
+
+
 def _sector_table(sectors: dict[str, dict[str, Any]]) -> list[str]:
     rows = [("  degrees", *sectors),
             ("  score", *(f"{v['score']:.2f}" for v in sectors.values())),
             ("  dropped", *(f"{v['drop_rate']:.0%}" for v in sectors.values())),
+            ("  at step", *(_drop_step(v) for v in sectors.values())),
             ("  episodes", *(str(v["episodes"]) for v in sectors.values()))]
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return ["  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip() for row in rows]

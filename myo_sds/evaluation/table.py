@@ -31,7 +31,7 @@ def _rows(summaries: list[dict[str, Any]]) -> list[tuple[str, list[str]]]:
     sectors = sorted({k for s in summaries for k in s["per_start_phase"]}, key=lambda k: int(k.split("-")[0]))
     for sector in sectors:
         rows.append((f"score, start {sector} deg", breakdown(
-            "per_start_phase", sector, lambda d: f"{d['score']:.3f} (n={d['episodes']}, drops {d['drop_rate']:.0%})")))
+            "per_start_phase", sector, _sector_cell)))
     sectors = sorted({k for s in summaries for k in s["per_target_phase"]}, key=lambda k: int(k.split("-")[0]))
     for sector in sectors:
         rows.append((f"solved, targets at {sector} deg", breakdown(
@@ -79,3 +79,9 @@ def format_table(reports: Sequence[EvaluationReport], width: int = TABLE_WIDTH) 
     measures = dict.fromkeys(s["per_start_phase_of"] for s in summaries if s["per_start_phase_of"] and s["per_start_phase"])
     lines += [f"start A-B deg: {', '.join(measures)}"] if measures else []
     return "\n".join(lines)
+
+
+def _sector_cell(sector: dict[str, Any]) -> str:
+    step = sector.get("drop_step")  # evaluation.json files written before it was recorded lack it
+    at = "" if step is None else f" at step {step:.0f}"
+    return f"{sector['score']:.3f} (n={sector['episodes']}, drops {sector['drop_rate']:.0%}{at})"
