@@ -8,7 +8,7 @@ distribution for the static-to-dynamic stabilization curriculum.
 Random draws at reset, in this order (the presets draw exactly what the official env draws,
 so the same seed gives the same task instance there and here):
   1. direction, if ``direction == "random"`` (one of hold, cw, ccw);
-  2. start angle, if ``start_angle == "uniform"`` (U(0, 2 pi));
+  2. start angle, if ``start_angle == "uniform"`` (U(0, 2 pi)) or a list (one of its angles);
   3. start offset, if ``start_offset`` is set;
   4. x radius, y radius (always, even when fixed), period (unless static);
   5. ball mass x2, friction x2, size x2 (each only when its knob is set);
@@ -98,6 +98,8 @@ class BaodingEnv(MuscleHandEnv):
         direction = DIRECTIONS[int(rng.choice(3))] if k.direction == "random" else k.direction
         if k.start_angle == "uniform":
             start = float(rng.uniform(low=0, high=2 * np.pi))
+        elif isinstance(k.start_angle, tuple):
+            start = k.start_angle[int(rng.integers(len(k.start_angle)))]
         elif k.start_angle == "fixed":
             start = OFFICIAL_START_ANGLE
         elif k.start_angle == "on_balls":

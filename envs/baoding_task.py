@@ -105,9 +105,13 @@ def _period(name: str, value: Any) -> Range | None:
     return None if value == "static" else parse_range(name, value, positive=True)
 
 
-def _start_angle(name: str, value: Any) -> str | float:
+def _start_angle(name: str, value: Any) -> str | float | tuple[float, ...]:
+    if isinstance(value, (list, tuple)):
+        if not value:
+            raise ValueError(f"{name}: an empty list; give one or more angles in radians")
+        return tuple(to_float(f"{name}[{i}]", v) for i, v in enumerate(value))
     return value if value in ("fixed", "on_balls", "uniform") else to_float(
-        f"{name} (or one of fixed, on_balls, uniform)", value)
+        f"{name} (or one of fixed, on_balls, uniform, or a list of radians)", value)
 
 
 def _friction(name: str, value: Any) -> tuple[tuple[float, ...], tuple[float, ...]]:
@@ -148,8 +152,9 @@ class BaodingKnobs(TaskKnobs):
                            help="m, ellipse half-axis along the palm's x: a value or [min, max]")
     y_radius: Range = setting(Range(0.028, 0.028), parse=ranged(positive=True),
                            help="m, ellipse half-axis along the palm's y: a value or [min, max]")
-    start_angle: str | float = setting("fixed", parse=_start_angle,
-                                    help="'fixed' (official pi/4), 'on_balls' (3pi/4), 'uniform', or radians")
+    start_angle: str | float | tuple[float, ...] = setting(
+        "fixed", parse=_start_angle,
+        help="'fixed' (official pi/4), 'on_balls' (3pi/4), 'uniform', radians, or a list of radians (one drawn per reset)")
     start_offset: Range | None = setting(None, parse=optional(ranged()),
                                       help="rad added to the start angle: a value or [min, max]")
     rsi_probability: float = setting(0.0, parse=parse_probability,

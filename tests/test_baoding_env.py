@@ -202,6 +202,28 @@ def test_episode_result_records_the_random_start_phase():
     assert len(set(phases)) == 3
 
 
+def test_start_angle_list_draws_one_of_its_angles_per_reset():
+    # Both placements of the balls across the palm (0 and pi: the same positions, the balls
+    # swapped), plus an offset: every start lies within the offset of one of the two.
+    env = BaodingEnv(start_angle=[0.0, math.pi], start_offset=[-0.1, 0.1], horizon=2)
+    centres = []
+    for seed in range(40):
+        env.reset(seed=seed)
+        start = env.task.start_angle
+        centre = min((0.0, math.pi), key=lambda c: abs(start - c))
+        assert abs(start - centre) <= 0.1
+        centres.append(centre)
+    assert 10 <= centres.count(0.0) <= 30  # both drawn, about evenly
+    env.reset(seed=7)
+    again = env.task.start_angle
+    env.reset(seed=7)
+    assert env.task.start_angle == again  # seeded
+    with pytest.raises(ValueError, match=r"start_angle\[1\]"):
+        BaodingEnv(start_angle=[0.0, "across"])
+    with pytest.raises(ValueError, match="empty list"):
+        BaodingEnv(start_angle=[])
+
+
 def test_truncates_at_horizon():
     env = BaodingEnv(drop_height=-10.0, horizon=30)
     env.reset(seed=0)
