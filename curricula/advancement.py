@@ -7,6 +7,7 @@ stage's env steps and its window of episode metric values), which the training l
 from __future__ import annotations
 
 import enum
+import math
 
 from myo_sds.curricula.schema import AdvanceRule
 from myo_sds.curricula.state import CurriculumState
@@ -31,17 +32,26 @@ def episode_metric(metric: str, result: EpisodeResult) -> float:
     raise ValueError(f"unknown metric {metric!r}")
 
 
+def measured_value(rule: AdvanceRule, state: CurriculumState) -> float:
+    """The value the rule compares with its threshold: the window's mean once the window is full,
+    or the stage's latest evaluation (nan when there is none yet)."""
+    if rule.metric == "eval_score":
+        return math.nan if state.last_evaluated is None else state.last_evaluated
+    if rule.metric == "eval_reward":
+        return math.nan if state.last_evaluated_reward is None else state.last_evaluated_reward
+    return state.measured if len(state.recent) >= rule.window else math.nan
+
+
 def decide(rule: AdvanceRule | None, state: CurriculumState) -> Decision:
     """Whether the stage is passed, goes on, or ran out of steps.
 
-    Passed needs a full window of episodes whose mean reaches the threshold, after at least
-    ``min_steps``. Plateaued: ``plateau_steps`` env steps since the window's mean last rose
-    ``plateau_gain`` above its best. A stage without a rule never ends by itself.
+    Passed needs, after at least ``min_steps``, a full window of episodes whose mean reaches the
+    threshold (for an evaluation metric: the latest evaluation at the threshold). Plateaued:
+    ``plateau_steps`` env steps since the window's mean last rose ``plateau_gain`` above its best. A stage without a rule never ends by itself.
     """
     if rule is None:
         return Decision.STAY
-    full_window = len(state.recent) >= rule.window
-    if state.stage_steps >= rule.min_steps and full_window and state.measured >= rule.threshold:
+    if state.stage_steps >= rule.min_steps and measured_value(rule, state) >= rule.threshold:
         return Decision.PASSED
     if rule.max_steps is not None and state.stage_steps >= rule.max_steps:
         return Decision.TIMED_OUT if rule.on_max_steps == "advance" else Decision.STOP

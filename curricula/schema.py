@@ -27,7 +27,10 @@ from myo_sds.run_settings import (
     learning_rate,
 )
 
-METRICS = ("score", "survival")
+# score and survival: the mean over the stage's last `window` training episodes; eval_score and
+# eval_reward: the stage's latest periodic evaluation (its `evaluate`), mean official score or return.
+METRICS = ("score", "survival", "eval_score", "eval_reward")
+EVALUATION_METRICS = ("eval_score", "eval_reward")
 ON_MAX_STEPS = ("advance", "stop")
 
 @dataclass(frozen=True)
@@ -38,8 +41,10 @@ class AdvanceRule:
     ``plateau_steps`` env steps (with a full window, after ``min_steps``), the stage ends
     unpassed and the run advances or stops (``on_max_steps``)."""
 
-    metric: str = setting("score", parse=one_of(*METRICS), help="score (official) | survival")
-    threshold: float = setting(0.5, parse=number(low=0, high=1), help="the window's mean that passes the stage")
+    metric: str = setting("score", parse=one_of(*METRICS),
+                          help="score (official) | survival over the window; eval_score | eval_reward of the "
+                               "latest stage evaluation")
+    threshold: float = setting(0.5, parse=number(), help="the value that passes the stage (in [0, 1] but for eval_reward)")
     window: int = setting(100, parse=integer(low=1), help="the stage's last training episodes averaged")
     min_steps: int = setting(0, parse=integer(low=0), help="env steps in the stage before it may pass")
     max_steps: int | None = setting(None, parse=optional(integer(low=1)), help="then the stage ends unpassed")
@@ -50,12 +55,18 @@ class AdvanceRule:
     plateau_gain: float = setting(0.01, parse=number(low=0), help="the rise that counts for plateau_steps")
 
     @property
+    def window_metric(self) -> str:
+        """What each training episode adds to the window (an evaluation metric's stage: its score)."""
+        return "score" if self.metric in EVALUATION_METRICS else self.metric
+
+    @property
     def tracked_gain(self) -> float | None:
         """The gain the curriculum state tracks the stage's best by (None: no plateau rule)."""
         return self.plateau_gain if self.plateau_steps is not None else None
 
 
 HAND_OFFS = ("best", "last")
+SELECTIONS = ("score", "reward")
 
 
 @dataclass(frozen=True)
@@ -63,15 +74,30 @@ class StageEvaluation:
     """Deterministic episodes every ``every`` env steps of the stage, as the 2022 winner's
     EvalCallback: ``episodes`` episodes (seeds 0 .. episodes-1, the same at every evaluation) on
     ``env`` (``stage``: the stage's own task; or a preset, e.g. ``p1_2022``), each hand joint moved
-    by U(-``start_noise``, ``start_noise``) at reset. The policy of the best mean score is kept; with
-    ``hand_off: best`` the next stage starts from it (weights, optimizer and normalization
-    statistics of that step), with ``last`` from the stage's last policy."""
+    by U(-``start_noise``, ``start_noise``) at reset. The policy of the best mean score (or return,
+    ``select: reward``, as the winner's EvalCallback chose) is kept; with ``hand_off: best`` the next
+    stage starts from it (weights, optimizer and normalization statistics of that step), with
+    ``last`` from the stage's last policy."""
 
     every: int = setting(MISSING, parse=integer(low=1), help="env steps between evaluations, e.g. 250000")
     episodes: int = setting(10, parse=integer(low=1), help="deterministic episodes per evaluation")
     env: str = setting("stage", parse=text, help="stage (the stage's own task) or a preset, e.g. p1_2022")
     start_noise: float = setting(0.0, parse=number(low=0), help="rad: each hand joint moved by up to this at reset")
     hand_off: str = setting("best", parse=one_of(*HAND_OFFS), help="best | last: the policy the next stage starts from")
+    select: str = setting("score", parse=one_of(*SELECTIONS),
+                          help="score | reward: what makes an evaluation the best (reward: the mean return under "
+                               "the stage's reward weights)")
+
+
+@dataclass(frozen=True)
+class StageEndProbe:
+    """At each stage's end, ``episodes`` deterministic episodes of the policy handed on, on ``env``
+    (``stage:NAME``: that stage's task, e.g. the fixed start from rest; or a preset): whether the
+    policy can already do what a later stage asks, before it trains on it."""
+
+    env: str = setting(MISSING, parse=text, help="stage:NAME (a stage of this curriculum) or a preset, e.g. p1_2022")
+    episodes: int = setting(20, parse=integer(low=1), help="deterministic episodes (seeds 0 .. episodes-1)")
+    start_noise: float = setting(0.0, parse=number(low=0), help="rad: each hand joint moved by up to this at reset")
 
 
 @dataclass(frozen=True)
@@ -106,6 +132,7 @@ class Curriculum:
     task: str
     stages: tuple[Stage, ...]
     path: Path | None = None
+    probe: StageEndProbe | None = None  # evaluated at each stage's end
 
     def file_text(self) -> str:
         """The curriculum as one self-contained file, for a run folder's own copy: the file as
@@ -116,7 +143,7 @@ class Curriculum:
             return text
         merged["name"] = self.name
         return (f"# {self.path.name} merged with its base files (base:): the curriculum this run follows\n"
-                + yaml.safe_dump({key: merged[key] for key in ("name", "task", "defaults", "stages") if key in merged},
+                + yaml.safe_dump({key: merged[key] for key in CURRICULUM_KEYS if key in merged},
                                  sort_keys=False))
 
     def stage_index(self, name: str) -> int:
@@ -157,6 +184,8 @@ def _advance_rule(reader: YamlReader, key: str, raw: Any) -> AdvanceRule | None:
     rule = read_settings(reader, key, raw, AdvanceRule)
     if rule.max_steps is not None and rule.max_steps < rule.min_steps:
         raise reader.error(f"{key}.max_steps", f"{rule.max_steps} is below min_steps {rule.min_steps}")
+    if rule.metric != "eval_reward" and not 0 <= rule.threshold <= 1:
+        raise reader.error(f"{key}.threshold", f"must be in [0, 1] for {rule.metric}, got {rule.threshold:g}")
     return rule
 
 
@@ -188,6 +217,24 @@ def stage_label(index: int, name: str | None = None) -> str:
     return f"stage {index + 1}" + (f" ({name})" if name else "")
 
 
+CURRICULUM_KEYS = ("name", "task", "defaults", "probe", "stages")
+
+
+def _probe(reader: YamlReader, task: str, raw: Any, stage_names: tuple[str, ...]) -> StageEndProbe | None:
+    if raw is None:
+        return None
+    probe = read_settings(reader, "probe", raw, StageEndProbe)
+    presets = TASK_SPECS[task].knobs.PRESETS
+    if probe.env.startswith("stage:"):
+        if probe.env[len("stage:"):] not in stage_names:
+            raise reader.error("probe.env", f"no stage named {probe.env[len('stage:'):]!r}; stages: {', '.join(stage_names)}")
+    elif probe.env not in presets:
+        raise reader.error("probe.env", f"{probe.env!r} is not stage:NAME or one of {', '.join(presets)}")
+    if probe.start_noise and not TASK_SPECS[task].hand_joints:
+        raise reader.error("probe.start_noise", f"the {task} task declares no hand joints to move")
+    return probe
+
+
 def load_curriculum(path: str | Path) -> Curriculum:
     """Read and validate a curriculum file (see README, "Writing a curriculum").
 
@@ -196,7 +243,7 @@ def load_curriculum(path: str | Path) -> Curriculum:
     """
     path = Path(path)
     reader = YamlReader(path)
-    raw = reader.mapping("", reader.read_with_bases("curriculum"), ("name", "task", "defaults", "stages"))
+    raw = reader.mapping("", reader.read_with_bases("curriculum"), CURRICULUM_KEYS)
     if not raw:
         raise reader.error("", "the curriculum file is empty")
     task = reader.read("task", raw.get("task", "baoding"), one_of(*TASK_SPECS))
@@ -208,6 +255,7 @@ def load_curriculum(path: str | Path) -> Curriculum:
         raise reader.error("stages", "expected a non-empty list of stages")
     stages, seen = [], set()
     # An error in a stage names the file that wrote the stage list (a base's, when inherited).
+    top_reader = reader
     reader = YamlReader(reader.origins["stages"]) if "stages" in reader.origins else reader
     for index, stage_raw in enumerate(stages_raw):
         key = stage_label(index)  # stages count from 1, as on the console
@@ -223,8 +271,11 @@ def load_curriculum(path: str | Path) -> Curriculum:
         advance = _advance_rule(reader, f"{key} advance", stage_raw.get("advance"))
         ppo = read_settings(reader, f"{key} ppo", stage_raw.get("ppo"), PpoOverrides)
         evaluation = _stage_evaluation(reader, f"{key} evaluate", task, stage_raw.get("evaluate"))
+        if advance is not None and advance.metric in EVALUATION_METRICS and evaluation is None:
+            raise reader.error(f"{key} advance.metric", f"{advance.metric} needs the stage's evaluate (none is set)")
         stages.append(Stage(stage_name, env, distribution, advance, ppo, evaluation))
-    return Curriculum(name=name, task=task, stages=tuple(stages), path=path)
+    probe = _probe(top_reader, task, raw.get("probe"), tuple(s.name for s in stages))
+    return Curriculum(name=name, task=task, stages=tuple(stages), path=path, probe=probe)
 
 
 # -- run config --------------------------------------------------------------------------

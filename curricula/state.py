@@ -47,6 +47,10 @@ class Transition:
     # stage (that of the best evaluation with ``hand_off: best``; None: the stage's last policy).
     best_evaluated: float | None = None
     handed_off_step: int | None = None
+    # The best evaluation's mean return (its reward weights), and the stage-end probe of the
+    # policy handed on (``probe`` in the curriculum): its env, score, median solved steps, drop rate.
+    best_evaluated_reward: float | None = None
+    probe: dict | None = None
 
 
 @dataclass
@@ -68,11 +72,14 @@ class CurriculumState:
     best_measured: float | None = None
     best_at_stage_step: int = 0
     # The current stage's periodic evaluations (``evaluate`` in the curriculum): how many ran,
-    # the last and the best mean score, and the run's env step of the best one.
+    # the last and the best one's mean score and mean return, and the run's env step of the best
+    # (the best by the stage's ``select``: score or reward).
     evaluations: int = 0
     last_evaluated: float | None = None
     best_evaluated: float | None = None
     best_evaluated_step: int | None = None
+    last_evaluated_reward: float | None = None
+    best_evaluated_reward: float | None = None
 
     # the current stage ------------------------------------------------------------------
 
@@ -104,21 +111,28 @@ class CurriculumState:
         self.episodes_per_stage[stage] = self.stage_episodes
         self.steps_per_stage[stage] = self.stage_steps
 
-    def record_evaluation(self, score: float) -> bool:
-        """A periodic evaluation of the current stage at the current step; True when its score is
-        the stage's best so far (strictly above: the earliest of equal scores is kept)."""
+    def record_evaluation(self, score: float, reward: float | None = None, select: str = "score") -> bool:
+        """A periodic evaluation of the current stage at the current step; True when it is the
+        stage's best so far by ``select`` (score or reward; strictly above: the earliest of equal
+        values is kept)."""
         self.evaluations += 1
-        self.last_evaluated = score
-        if self.best_evaluated is None or score > self.best_evaluated:
-            self.best_evaluated, self.best_evaluated_step = score, self.num_timesteps
-            return True
-        return False
+        self.last_evaluated, self.last_evaluated_reward = score, reward
+        if select == "reward":
+            best = self.best_evaluated_reward is None or (reward is not None and reward > self.best_evaluated_reward)
+        else:
+            best = self.best_evaluated is None or score > self.best_evaluated
+        if best:
+            self.best_evaluated, self.best_evaluated_reward = score, reward
+            self.best_evaluated_step = self.num_timesteps
+        return best
 
-    def end_stage(self, stage: str, decision: str, wall_s: float, handed_off_step: int | None = None) -> Transition:
-        """Record the current stage's end (``decision``: passed | timed_out | plateaued | stop) and
-        the step of the policy it hands on, when not its last."""
+    def end_stage(self, stage: str, decision: str, wall_s: float, handed_off_step: int | None = None,
+                  probe: dict | None = None) -> Transition:
+        """Record the current stage's end (``decision``: passed | timed_out | plateaued | stop), the
+        step of the policy it hands on, when not its last, and the stage-end probe of that policy."""
         transition = Transition(stage, self.stage_index, decision, self.num_timesteps, self.stage_steps,
-                                self.stage_episodes, self.measured, wall_s, self.best_evaluated, handed_off_step)
+                                self.stage_episodes, self.measured, wall_s, self.best_evaluated, handed_off_step,
+                                self.best_evaluated_reward, probe)
         self.history.append(transition)
         return transition
 
@@ -130,6 +144,7 @@ class CurriculumState:
         self.recent = []
         self.best_measured, self.best_at_stage_step = None, 0
         self.evaluations, self.last_evaluated, self.best_evaluated, self.best_evaluated_step = 0, None, None, None
+        self.last_evaluated_reward = self.best_evaluated_reward = None
 
     # the whole run -------------------------------------------------------------------
 

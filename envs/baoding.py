@@ -91,6 +91,7 @@ class BaodingEnv(MuscleHandEnv):
         self._init_qpos[0] = -1.57  # palm up, as the official env
         self._obs = np.zeros(self.OBS_SIZE)
         self._target_angle = 0.0  # the first target's angle on its orbit at this step
+        self._balls_placed = False  # whether this episode's balls were put on their targets (RSI)
 
     def sample_task(self, rng: np.random.Generator) -> BaodingTask:
         """Draw a task instance from the current knobs (draw order: module docstring)."""
@@ -124,6 +125,7 @@ class BaodingEnv(MuscleHandEnv):
     def _start_episode(self, task: BaodingTask, rng: np.random.Generator,
                        state: Mapping[str, Any] | None) -> None:
         self.data.qpos[:] = self._init_qpos
+        self._balls_placed = False
         self._apply_ball_physics(task)
         self._place_targets(0)
         if state is None:
@@ -157,6 +159,11 @@ class BaodingEnv(MuscleHandEnv):
 
     def _episode_start_phase(self) -> float:
         return float(self.task.start_angle % (2 * np.pi))
+
+    def _episode_start_kind(self) -> str:
+        if self.recorded_start:
+            return "recorded"
+        return "on_targets" if self._balls_placed else "rest"
 
     def _episode_horizon(self) -> int:
         return self.knobs.episode_steps or self.horizon
@@ -234,6 +241,7 @@ class BaodingEnv(MuscleHandEnv):
         p = knobs.rsi_probability
         if p >= 1.0 or (p > 0.0 and rng.uniform() < p):
             self._balls_onto_targets()
+            self._balls_placed = True
 
     def _balls_onto_targets(self) -> None:
         """Reference state initialization: each ball on its target site, at rest.

@@ -156,6 +156,10 @@ class MuscleHandEnv(gym.Env):
         ``start_phase_name``); called at reset, after the first observation."""
         return None
 
+    def _episode_start_kind(self) -> str | None:
+        """How the episode began, for reports (EpisodeResult.start); called at reset."""
+        return "recorded" if self.recorded_start else None
+
     def _episode_horizon(self) -> int:
         """Control steps before truncation this episode (a knob may lengthen the constructor's)."""
         return self.horizon
@@ -215,7 +219,8 @@ class MuscleHandEnv(gym.Env):
         # The observation needs positions only; mj_step computes everything else itself.
         mujoco.mj_kinematics(self.model, self.data)
         obs = self._observe().astype(np.float32)
-        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "length": 0, "start_phase": self._episode_start_phase(),
+        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "reward": 0.0, "length": 0,
+                         "start_phase": self._episode_start_phase(), "start": self._episode_start_kind(),
                          "phase_steps": [0] * PHASE_SECTORS, "phase_solved": [0] * PHASE_SECTORS}
         return obs, {"task": task}
 
@@ -291,6 +296,7 @@ class MuscleHandEnv(gym.Env):
         episode["length"] += 1
         episode["solved_steps"] += int(terms["solved"])
         episode["effort_sum"] -= terms["act_reg"]
+        episode["reward"] += reward
         phase = self._goal_phase()
         if phase is not None:
             sector = phase_sector(phase)
@@ -302,7 +308,7 @@ class MuscleHandEnv(gym.Env):
                 solved_steps=episode["solved_steps"], length=episode["length"], horizon=horizon,
                 dropped=bool(terms["done"]), effort=episode["effort_sum"] / episode["length"],
                 direction=self._episode_label(), task=self.TASK_NAME, start_phase=episode["start_phase"],
-                **self._phase_counts(episode))
+                reward=episode["reward"], start=episode["start"], **self._phase_counts(episode))
         return obs, reward, terminated, truncated, info
 
     @staticmethod

@@ -47,6 +47,12 @@ class EpisodeResult:
     # which part of the orbit a policy fails to carry the balls through.
     steps_by_target_phase: tuple[int, ...] | None = None
     solved_by_target_phase: tuple[int, ...] | None = None
+    # The episode's return under the env's reward weights (None: not known, e.g. the official env).
+    reward: float | None = None
+    # How the episode began (Baoding): "on_targets" (the balls placed on their targets), "rest"
+    # (the balls where the hand holds them, the targets wherever the task starts them) or
+    # "recorded" (a banked state of an earlier episode); None where the task does not say.
+    start: str | None = None
 
     @property
     def score(self) -> float:

@@ -1,4 +1,5 @@
-"""``episodes.csv`` of a run folder: one row per training episode (:class:`EpisodeRecord`).
+"""``episodes.csv`` of a run folder: one row per training episode (:class:`EpisodeRecord`);
+``evaluations.csv``: one row per stage evaluation or stage-end probe (:class:`EvaluationRecord`).
 
 Only :class:`myo_sds.run_folder.RunFolder` calls these, with its own file's path.
 """
@@ -12,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 EPISODE_COLUMNS = ("step", "wall_s", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
-                   "effort", "direction", "start_phase")
+                   "effort", "direction", "start_phase", "reward", "start")
 
 
 @dataclass(frozen=True)
@@ -30,19 +31,76 @@ class EpisodeRecord:
     effort: float
     direction: str
     start_phase: float | None  # rad; None in runs begun before it was logged
+    reward: float | None = None  # the episode's return under the stage's reward weights
+    start: str | None = None  # on_targets | rest | recorded (EpisodeResult.start)
 
     def to_row(self) -> tuple:
         phase = "" if self.start_phase is None else f"{self.start_phase:.4f}"
+        reward = "" if self.reward is None else f"{self.reward:.6g}"
         return (self.step, f"{self.wall_s:.2f}", self.stage_index, self.stage, f"{self.score:.6g}", self.solved_steps,
-                self.length, int(self.dropped), f"{self.effort:.6g}", self.direction or "", phase)
+                self.length, int(self.dropped), f"{self.effort:.6g}", self.direction or "", phase, reward,
+                self.start or "")
 
     @classmethod
     def from_row(cls, row: dict[str, str]) -> EpisodeRecord:
-        phase = row.get("start_phase") or ""
+        phase, reward = row.get("start_phase") or "", row.get("reward") or ""
         return cls(int(row["step"]), float(row["wall_s"]), int(row["stage_index"]), row["stage"], float(row["score"]),
                    int(row["solved_steps"]), int(row["length"]), row["dropped"] == "1", float(row["effort"]),
-                   row["direction"], float(phase) if phase else None)
+                   row["direction"], float(phase) if phase else None, float(reward) if reward else None,
+                   row.get("start") or None)
 
+
+
+EVALUATION_COLUMNS = ("step", "stage_index", "stage", "kind", "env", "episodes", "score", "reward", "drop_rate",
+                      "median_solved_steps", "best")
+
+
+@dataclass(frozen=True)
+class EvaluationRecord:
+    """One row of ``evaluations.csv``: deterministic episodes of the policy of env step ``step``.
+
+    ``kind``: ``periodic`` (the stage's ``evaluate``), ``final`` (its last policy, at the stage's
+    end) or ``probe`` (the curriculum's stage-end probe of the policy handed on); ``best``: it became
+    the stage's best."""
+
+    step: int
+    stage_index: int
+    stage: str
+    kind: str
+    env: str
+    episodes: int
+    score: float
+    reward: float | None
+    drop_rate: float
+    median_solved_steps: float
+    best: bool = False
+
+    def to_row(self) -> tuple:
+        reward = "" if self.reward is None else f"{self.reward:.6g}"
+        return (self.step, self.stage_index, self.stage, self.kind, self.env, self.episodes, f"{self.score:.6g}", reward,
+                f"{self.drop_rate:.6g}", f"{self.median_solved_steps:g}", int(self.best))
+
+    @classmethod
+    def from_row(cls, row: dict[str, str]) -> EvaluationRecord:
+        return cls(int(row["step"]), int(row["stage_index"]), row["stage"], row["kind"], row["env"], int(row["episodes"]),
+                   float(row["score"]), float(row["reward"]) if row["reward"] else None, float(row["drop_rate"]),
+                   float(row["median_solved_steps"]), row["best"] == "1")
+
+
+def append_evaluations(path: Path, records: Iterable[EvaluationRecord]) -> None:
+    new = not path.exists()
+    with path.open("a", newline="") as file:
+        writer = csv.writer(file)
+        if new:
+            writer.writerow(EVALUATION_COLUMNS)
+        writer.writerows(record.to_row() for record in records)
+
+
+def read_evaluations(path: Path) -> list[EvaluationRecord]:
+    if not path.is_file():
+        return []
+    with path.open(newline="") as file:
+        return [EvaluationRecord.from_row(row) for row in csv.DictReader(file)]
 
 
 def append_episodes(path: Path, records: Iterable[EpisodeRecord]) -> None:
@@ -66,8 +124,8 @@ def read_episodes(path: Path) -> list[EpisodeRecord]:
 
 
 def truncate_episodes(path: Path, max_step: int) -> None:
-    """Drop episodes logged after the checkpoint a resumed run restarts from, and a row that a
-    kill cut short."""
+    """Drop rows (episodes, evaluations) logged after the checkpoint a resumed run restarts from,
+    and a row that a kill cut short."""
     if not path.exists():
         return
     with path.open(newline="") as file:

@@ -7,6 +7,8 @@
       command.txt, versions.json        each session's command line, time and machine; package versions
       curriculum_state.json             the curriculum state of the latest checkpoint
       episodes.csv                      one row per training episode
+      evaluations.csv                   one row per stage evaluation and stage-end probe
+      stages/                           the policy each finished stage handed on: <NN>_<stage>.zip, _vecnormalize.pkl
       checkpoints/                      rl_model_<steps>_steps.zip, rl_model_vecnormalize_<steps>_steps.pkl,
                                         curriculum_state_<steps>_steps.json, random_state_<steps>_steps.pkl
       final_model.zip, final_vecnormalize.pkl
@@ -33,14 +35,26 @@ from pathlib import Path
 from typing import Any
 
 from myo_sds.curricula.state import CurriculumState
-from myo_sds.episode_log import EPISODE_COLUMNS, EpisodeRecord, append_episodes, read_episodes, truncate_episodes
+from myo_sds.episode_log import (
+    EPISODE_COLUMNS,
+    EpisodeRecord,
+    EvaluationRecord,
+    append_episodes,
+    append_evaluations,
+    read_episodes,
+    read_evaluations,
+    truncate_episodes,
+)
 
-__all__ = ["EPISODE_COLUMNS", "CheckpointFiles", "EpisodeRecord", "RunFolder", "checkpoint_files", "statistics_beside"]
+__all__ = ["EPISODE_COLUMNS", "CheckpointFiles", "EpisodeRecord", "EvaluationRecord", "RunFolder", "checkpoint_files",
+           "statistics_beside"]
 
 CONFIG_FILE = "config.yaml"
 CURRICULUM_FILE = "curriculum.yaml"
 STATE_FILE = "curriculum_state.json"
 EPISODES_FILE = "episodes.csv"
+EVALUATIONS_FILE = "evaluations.csv"
+STAGES_DIR = "stages"
 CHECKPOINT_DIR = "checkpoints"
 FINAL_MODEL = "final_model.zip"
 FINAL_VECNORMALIZE = "final_vecnormalize.pkl"
@@ -130,6 +144,7 @@ class RunFolder:
     curriculum_file = _InRun(CURRICULUM_FILE)
     state_file = _InRun(STATE_FILE)
     episodes_file = _InRun(EPISODES_FILE)
+    evaluations_file = _InRun(EVALUATIONS_FILE)
     checkpoint_dir = _InRun(CHECKPOINT_DIR)
     final_model = _InRun(FINAL_MODEL)
     final_vecnormalize = _InRun(FINAL_VECNORMALIZE)
@@ -234,13 +249,21 @@ class RunFolder:
         walls = state.stage_start_walls(self.read_episodes())[1:]
         state.history = [replace(t, wall_s=wall_s) for t, wall_s in zip(state.history, walls)]
         target.state_file.write_text(state.to_json())
+        self._copy_evaluations(target, state.num_timesteps)
         return target
+
+    def _copy_evaluations(self, target: RunFolder, max_step: int) -> None:
+        """The evaluation log up to ``max_step`` (small; the stage curves are drawn from it)."""
+        target.evaluations_file.unlink(missing_ok=True)
+        records = [r for r in self.read_evaluations() if r.step <= max_step]
+        if records:
+            target.append_evaluations(records)
 
     def export_resumable(self, destination: Path, checkpoint: CheckpointFiles | None = None) -> RunFolder:
         """What ``--resume`` needs of the run, for another machine: config, curriculum,
         provenance, and one checkpoint (default: the newest complete one) with its model,
-        optimizer, statistics, curriculum and random state; no episode log and no TensorBoard
-        events. An earlier export at ``destination`` is replaced (its checkpoints removed)."""
+        optimizer, statistics, curriculum and random state, and the evaluation log; no episode log
+        and no TensorBoard events. An earlier export at ``destination`` is replaced (its checkpoints removed)."""
         import shutil
 
         checkpoint = checkpoint or self.latest_checkpoint()
@@ -255,10 +278,12 @@ class RunFolder:
                              (checkpoint.state, target.state_file)):
             if source.is_file():
                 shutil.copyfile(source, copy)
-        best_step = checkpoint.read_state().best_evaluated_step
+        state = checkpoint.read_state()
+        best_step = state.best_evaluated_step
         for path in [*checkpoint, *(self.best_files(best_step) if best_step is not None else ())]:
             if path.is_file():
                 shutil.copyfile(path, target.checkpoint_dir / path.name)
+        self._copy_evaluations(target, state.num_timesteps)
         return target
 
     @classmethod
@@ -369,4 +394,25 @@ class RunFolder:
         return read_episodes(self.episodes_file)
 
     def truncate_episodes(self, max_step: int) -> None:
+        """Forget episodes and evaluations logged after ``max_step`` (a resumed run redoes them)."""
         truncate_episodes(self.episodes_file, max_step)
+        truncate_episodes(self.evaluations_file, max_step)
+
+    def append_evaluations(self, records: Iterable[EvaluationRecord]) -> None:
+        append_evaluations(self.evaluations_file, records)
+
+    def read_evaluations(self) -> list[EvaluationRecord]:
+        return read_evaluations(self.evaluations_file)
+
+    # stages ----------------------------------------------------------------------------
+
+    def stage_policy_files(self, stage_index: int, stage: str) -> tuple[Path, Path]:
+        """The policy stage ``stage_index`` (from 0) handed on, and its statistics."""
+        stem = self.path / STAGES_DIR / f"{stage_index + 1:02d}_{stage}"
+        return stem.with_name(stem.name + ".zip"), stem.with_name(stem.name + "_vecnormalize.pkl")
+
+    def save_stage_policy(self, stage_index: int, stage: str, model, venv) -> None:
+        model_file, statistics = self.stage_policy_files(stage_index, stage)
+        model_file.parent.mkdir(parents=True, exist_ok=True)
+        _atomic_save(model_file, model.save)
+        _atomic_save(statistics, lambda tmp: venv.save(str(tmp)))

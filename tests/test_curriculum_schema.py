@@ -105,7 +105,7 @@ def test_good_curriculum_is_parsed_with_defaults_merged(tmp_path):
 @pytest.mark.parametrize("old,new,expected", [
     ("    advance: {metric: score, threshold: 0.1, window: 5}",
      "    advance: {metric: score, threshold: 1.5, window: 5}",
-     "stage 1 (a) advance.threshold: must be <= 1"),
+     "stage 1 (a) advance.threshold: must be in [0, 1] for score"),
     ("    advance: {metric: score, threshold: 0.1, window: 5}",
      "    advance: {metric: score, threshold: 0.1, windw: 5}",
      "stage 1 (a) advance.windw: unknown key (did you mean 'window'?); allowed: metric, threshold, window"),

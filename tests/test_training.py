@@ -211,13 +211,15 @@ def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     run = tmp_path / "run"
     state = CurriculumTrainer.start(config, run_dir=run, progress=False).run()
     assert state.status == "budget_reached" and state.num_timesteps == 256
-    # Each episode's start phase is logged (random phases here).
+    # Each episode's start phase is logged (random phases here), its return and how it began.
     episodes_file = RunFolder(run).episodes_file
     header, *rows = [line.split(",") for line in episodes_file.read_text().splitlines()]
-    assert header[-1] == "start_phase" and len({row[-1] for row in rows}) > 1
-    assert all(0 <= float(row[-1]) < 6.2832 for row in rows)
+    assert header[-3:] == ["start_phase", "reward", "start"]
+    phase = header.index("start_phase")
+    assert len({row[phase] for row in rows}) > 1 and all(0 <= float(row[phase]) < 6.2832 for row in rows)
     # A run begun by an older version logged no start phases: its rows keep matching its header.
-    episodes_file.write_text("".join(",".join(r[:-1]) + "\n" for r in [header, *rows]))
+    header, rows = header[:phase], [row[:phase] for row in rows]
+    episodes_file.write_text("".join(",".join(r) + "\n" for r in [header, *rows]))
     with pytest.raises(ConfigError, match="budget_reached.*--total-steps"):
         CurriculumTrainer.resume(run, progress=False)
     with pytest.raises(ConfigError, match="total_steps 256 must exceed the 256 steps"):
@@ -228,7 +230,7 @@ def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     assert yaml.safe_load(RunFolder(run).config_file.read_text())["total_steps"] == 512
     assert RunFolder(run).latest_checkpoint().model.name == "rl_model_512_steps.zip"
     lines = [line.split(",") for line in episodes_file.read_text().splitlines()]
-    assert lines[0] == header[:-1] and {len(line) for line in lines} == {len(header) - 1}
+    assert lines[0] == header and {len(line) for line in lines} == {len(header)}
     steps = [int(line[0]) for line in lines[1:]]
     assert steps == sorted(steps) and steps[-1] > 256
 
@@ -321,7 +323,7 @@ def test_bad_config_fails_before_training(tmp_path, capsys):
     (tmp_path / "run.yaml").write_text(CONFIG.format(total=100))
     assert main(["--config", str(tmp_path / "run.yaml"), "--run-dir", str(tmp_path / "run")]) == 2
     assert capsys.readouterr().err == (f"error: {tmp_path / 'curriculum.yaml'}: stage 1 (easy) advance.threshold: "
-                                       "must be <= 1, got 2\n")
+                                       "must be in [0, 1] for score, got 2\n")
     assert not (tmp_path / "run").exists()
 
 

@@ -43,6 +43,13 @@ class StageSummary:
     evaluated_last: float | None = None
     evaluated_best_step: int | None = None
     handed_off_step: int | None = None
+    evaluated_best_reward: float | None = None  # the best evaluation's mean return
+    evaluated_last_reward: float | None = None
+    # The stage-end probe of the policy handed on (``probe`` in the curriculum).
+    probe: dict[str, Any] | None = None
+    # The rest-start signal: the stage's training episodes that began with the balls at rest (not
+    # placed on their targets), by direction: how many, their median solved steps and mean score.
+    rest_starts: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 @dataclass
@@ -90,6 +97,7 @@ def summarize(run_dir: str | Path) -> RunSummary:
             base.wall_s = start_walls[index + 1] - start_walls[index]
             base.measured = None if math.isnan(transition.measured) else transition.measured
             base.evaluated_best, base.handed_off_step = transition.best_evaluated, transition.handed_off_step
+            base.evaluated_best_reward, base.probe = transition.best_evaluated_reward, transition.probe
         elif index == state.stage_index:
             base.status = "current" if state.status.value in ("running", "interrupted", "time_limit") else state.status.value
             base.env_steps, base.episodes = state.num_timesteps - state.stage_start_step, state.stage_episodes
@@ -97,6 +105,7 @@ def summarize(run_dir: str | Path) -> RunSummary:
             base.measured = float(np.mean(state.recent)) if state.recent else None
             base.evaluated_best, base.evaluated_last = state.best_evaluated, state.last_evaluated
             base.evaluated_best_step = state.best_evaluated_step
+            base.evaluated_best_reward, base.evaluated_last_reward = state.best_evaluated_reward, state.last_evaluated_reward
             in_stage = [r for r in records if r.stage_index == index]
             if rule is not None and in_stage:
                 values = _metric_values(in_stage, rule.metric)
@@ -106,11 +115,26 @@ def summarize(run_dir: str | Path) -> RunSummary:
                     if len(upto):
                         base.trend.append((int(mark), float(upto.mean())))
             base.by_start_phase = per_start_phase(in_stage[-BREAKDOWN_EPISODES:])
+        if index <= state.stage_index:
+            base.rest_starts = rest_starts([r for r in records if r.stage_index == index])
         stages.append(base)
     # An exported model (no checkpoints of its own) is a snapshot: its file times say nothing.
     saved_at = folder.state_file.stat().st_mtime if folder.checkpoint_dir.is_dir() else None
     return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages, saved_at,
                       _action_std(folder), TASK_SPECS[curriculum.task].start_phase_name)
+
+
+def rest_starts(records: list[EpisodeRecord]) -> dict[str, dict[str, Any]]:
+    """Of ``records``, the episodes begun with the balls at rest, by direction: count, median
+    solved steps, mean score (empty when none did, or the log predates the ``start`` column)."""
+    by_direction: dict[str, list[EpisodeRecord]] = {}
+    for r in records:
+        if r.start == "rest":
+            by_direction.setdefault(r.direction or "all", []).append(r)
+    return {direction: {"episodes": len(members),
+                        "median_solved_steps": float(np.median([r.solved_steps for r in members])),
+                        "score": float(np.mean([r.score for r in members]))}
+            for direction, members in sorted(by_direction.items())}
 
 
 def _action_std(folder: RunFolder) -> tuple[float, float, float] | None:
@@ -137,8 +161,7 @@ def stage_rows(summary: RunSummary) -> tuple[tuple[str, ...], list[tuple[str, ..
     """The stage table's header and one row of text per stage (``--status`` and model cards)."""
     rows = []
     for s in summary.stages:
-        target = (f"{s.metric} {'-' if s.measured is None else f'{s.measured:.3f}'} / {s.threshold}"
-                  if s.metric else "no advancement rule")
+        target = _target(s)
         rows.append((f"{s.index} {s.name}", s.status, f"{s.env_steps:,}", f"{s.wall_s / 3600:.2f}", f"{s.episodes:,}",
                      target))
     if any(s.evaluated_best is not None for s in summary.stages):
@@ -147,14 +170,33 @@ def stage_rows(summary: RunSummary) -> tuple[tuple[str, ...], list[tuple[str, ..
     return STAGE_COLUMNS, rows
 
 
+def _target(s: StageSummary) -> str:
+    """The stage's advancement value against its threshold (an evaluation metric: the best
+    evaluation's, with the training window's score beside it)."""
+    if not s.metric:
+        return "no advancement rule"
+    window = "-" if s.measured is None else f"{s.measured:.3f}"
+    if s.metric == "eval_reward":
+        best = "-" if s.evaluated_best_reward is None else f"{s.evaluated_best_reward:.0f}"
+        return f"eval return {best} (best) / {s.threshold:g}; training score {window}"
+    if s.metric == "eval_score":
+        best = "-" if s.evaluated_best is None else f"{s.evaluated_best:.3f}"
+        return f"eval score {best} (best) / {s.threshold:g}; training score {window}"
+    return f"{s.metric} {window} / {s.threshold}"
+
+
 def _evaluated(s: StageSummary) -> str:
     if s.evaluated_best is None:
         return "-"
     text = f"best {s.evaluated_best:.3f}"
+    if s.evaluated_best_reward is not None:
+        text += f" (return {s.evaluated_best_reward:.0f})"
     if s.evaluated_best_step is not None:
         text += f" at {_steps(s.evaluated_best_step)}"
     if s.evaluated_last is not None:
         text += f", last {s.evaluated_last:.3f}"
+        if s.evaluated_last_reward is not None:
+            text += f" ({s.evaluated_last_reward:.0f})"
     if s.status not in ("current", "not reached"):
         text += f"; handed on {'the best' if s.handed_off_step is not None else 'its last'}"
     return text
@@ -184,6 +226,21 @@ def format_summary(summary: RunSummary, now: float | None = None) -> str:
     for s in current:
         points = ", ".join(f"{value:.3f} at {_steps(step)}" for step, value in s.trend)
         lines.append(f"stage {s.index} trend ({s.metric} over the last {s.window} episodes): {points}")
+    rest = [s for s in summary.stages if s.rest_starts]
+    if rest:
+        lines.append("episodes begun with the balls at rest (not on their targets), by direction: "
+                     "count, median solved steps")
+        for s in rest:
+            parts = "; ".join(f"{d} {v['episodes']:,}, {v['median_solved_steps']:.0f}" for d, v in s.rest_starts.items())
+            lines.append(f"  stage {s.index} ({s.name}): {parts}")
+    probed = [s for s in summary.stages if s.probe]
+    if probed:
+        env = probed[0].probe["env"]
+        lines.append(f"stage-end probe of the policy handed on ({env}, {probed[0].probe['episodes']} episodes):")
+        for s in probed:
+            p = s.probe
+            lines.append(f"  stage {s.index} ({s.name}): median solved steps {p['median_solved_steps']:.0f}, "
+                         f"score {p['score']:.3f}, {p['drop_rate']:.0%} dropped")
     for s in summary.stages:
         if s.by_start_phase:
             n = sum(sector["episodes"] for sector in s.by_start_phase.values())

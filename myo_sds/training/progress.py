@@ -28,8 +28,10 @@ class StageProgressBar:
         self.close()
         rule = stage.advance
         limit = rule.max_steps if rule is not None and rule.max_steps is not None else budget - run_steps + stage_steps
+        over = (f"over {rule.window} episodes" if rule is None or rule.window_metric == rule.metric
+                else "in a stage evaluation")
         self.write(f"{stage_label(index, stage.name)} of {self.n_stages}"
-                   + (f": until {rule.metric} >= {rule.threshold} over {rule.window} episodes, at most "
+                   + (f": until {rule.metric} >= {rule.threshold:g} {over}, at most "
                       f"{limit:,} env steps" if rule is not None else ": until the step budget is spent"))
         self.bar = tqdm(total=limit, initial=stage_steps, unit="step", unit_scale=True, dynamic_ncols=True,
                         desc=f"stage {index + 1}/{self.n_stages}", disable=not self.enabled, smoothing=0.1,

@@ -1,5 +1,7 @@
-"""A stage's periodic evaluation (``evaluate`` in the curriculum): deterministic episodes of the
-policy being trained, on the stage's task or a preset, scored as ``evaluate.py`` scores them.
+"""A stage's periodic evaluation (``evaluate`` in the curriculum) and the curriculum's stage-end
+probe (``probe``): deterministic episodes of the policy being trained, on the stage's task, another
+stage's or a preset, scored as ``evaluate.py`` scores them and logged to the run's
+``evaluations.csv``.
 
 It reads the model and the current normalization statistics and draws nothing from the
 training's random streams (its env is its own, reset with seeds 0 .. episodes-1), so a run
@@ -8,52 +10,113 @@ with evaluations trains exactly as one without them.
 
 from __future__ import annotations
 
-from myo_sds.curricula.schema import Stage
+from dataclasses import dataclass
+
+import numpy as np
+
+from myo_sds.curricula.schema import Curriculum, Stage, StageEndProbe
 from myo_sds.curricula.state import CurriculumState
-from myo_sds.envs.metrics import official_score
+from myo_sds.envs.metrics import EpisodeResult, drop_rate, official_score
 from myo_sds.evaluation.checkpoints import EnvChoice, LoadedPolicy
 from myo_sds.evaluation.episodes import make_env, run_episode
+from myo_sds.run_folder import EvaluationRecord
+
+
+@dataclass(frozen=True)
+class EvaluationResult:
+    """What a set of deterministic episodes says: mean official score, mean return (under the
+    evaluated env's reward weights), drop rate and median solved steps."""
+
+    env: str
+    episodes: int
+    score: float
+    reward: float | None
+    drop_rate: float
+    median_solved_steps: float
+
+    @classmethod
+    def of(cls, env: str, results: list[EpisodeResult]) -> EvaluationResult:
+        rewards = [r.reward for r in results if r.reward is not None]
+        return cls(env, len(results), official_score(results),
+                   float(np.mean(rewards)) if len(rewards) == len(results) else None, drop_rate(results),
+                   float(np.median([r.solved_steps for r in results])))
+
+    def as_dict(self) -> dict:
+        return {"env": self.env, "episodes": self.episodes, "score": self.score, "reward": self.reward,
+                "drop_rate": self.drop_rate, "median_solved_steps": self.median_solved_steps}
 
 
 class StageEvaluator:
-    """Runs a stage's evaluation episodes; keeps one env per evaluated task distribution."""
+    """Runs evaluation episodes; keeps one env per evaluated task distribution."""
 
-    def __init__(self, task: str) -> None:
-        self.task = task
+    def __init__(self, curriculum: Curriculum) -> None:
+        self.curriculum = curriculum
+        self.task = curriculum.task
         self._envs: dict[tuple[str, float], object] = {}
         self._last_step: int | None = None  # the env step of the last evaluation
 
-    def choice(self, stage: Stage) -> EnvChoice:
+    def _choice(self, env: str, stage: Stage, start_noise: float) -> EnvChoice:
         from myo_sds.envs.task_specs import TASK_SPECS
 
-        evaluation = stage.evaluate
-        if evaluation.env == "stage":
-            return EnvChoice(self.task, f"stage:{stage.name}", stage.distribution, False, evaluation.start_noise)
-        knobs = TASK_SPECS[self.task].knobs.parse(evaluation.env)
-        return EnvChoice(self.task, evaluation.env, knobs, False, evaluation.start_noise)
+        if env == "stage":
+            return EnvChoice(self.task, f"stage:{stage.name}", stage.distribution, False, start_noise)
+        if env.startswith("stage:"):
+            other = self.curriculum.stages[self.curriculum.stage_index(env[len("stage:"):])]
+            return EnvChoice(self.task, env, other.distribution, False, start_noise)
+        return EnvChoice(self.task, env, TASK_SPECS[self.task].knobs.parse(env), False, start_noise)
 
-    def score(self, model, venv, stage: Stage) -> float:
-        """The mean official score of ``stage.evaluate.episodes`` deterministic episodes of
-        ``model``, its observations normalized by ``venv``'s current statistics."""
-        choice = self.choice(stage)
+    def choice(self, stage: Stage) -> EnvChoice:
+        return self._choice(stage.evaluate.env, stage, stage.evaluate.start_noise)
+
+    def run(self, model, venv, choice: EnvChoice, episodes: int) -> EvaluationResult:
+        """``episodes`` deterministic episodes (seeds 0 ..) of ``model``, its observations
+        normalized by ``venv``'s current statistics."""
         key = (choice.name, choice.start_noise)
         env = self._envs.get(key)
         if env is None:
             env = self._envs[key] = make_env(choice)
         policy = LoadedPolicy(model, venv if hasattr(venv, "normalize_obs") else None)
-        return official_score([run_episode(policy, env, choice, seed) for seed in range(stage.evaluate.episodes)])
+        return EvaluationResult.of(choice.name, [run_episode(policy, env, choice, seed) for seed in range(episodes)])
 
-    def evaluate(self, model, venv, stage: Stage, state: CurriculumState, folder) -> str:
-        """The stage's evaluation at the current step: logged, recorded in ``state``, a new best
-        policy kept in the run folder. Returns the line to print."""
-        score = self.score(model, venv, stage)
+    def score(self, model, venv, stage: Stage) -> float:
+        """The mean official score of the stage's evaluation episodes."""
+        return self.run(model, venv, self.choice(stage), stage.evaluate.episodes).score
+
+    def evaluate(self, model, venv, stage: Stage, state: CurriculumState, folder, kind: str = "periodic") -> str:
+        """The stage's evaluation at the current step: logged, recorded in ``state`` and the run's
+        ``evaluations.csv``, a new best policy kept in the run folder. Returns the line to print."""
+        result = self.run(model, venv, self.choice(stage), stage.evaluate.episodes)
         self._last_step = state.num_timesteps
-        if state.record_evaluation(score):
+        best = state.record_evaluation(result.score, result.reward, stage.evaluate.select)
+        if best:
             folder.save_best(model, venv, state.num_timesteps)
-        model.logger.record("eval/score", score)
-        model.logger.record("eval/best_score", state.best_evaluated)
-        return (f"evaluation at step {state.num_timesteps}: {score:.3f} (best {state.best_evaluated:.3f} at step "
-                f"{state.best_evaluated_step})")
+        folder.append_evaluations([self._record(result, state, stage, kind, best)])
+        logger = model.logger
+        logger.record("eval/score", result.score)
+        logger.record("eval/best_score", state.best_evaluated)
+        logger.record("eval/drop_rate", result.drop_rate)
+        logger.record("eval/median_solved_steps", result.median_solved_steps)
+        if result.reward is not None:
+            logger.record("eval/reward", result.reward)
+        reward = "" if result.reward is None else f", return {result.reward:.0f}"
+        best_reward = "" if state.best_evaluated_reward is None else f", return {state.best_evaluated_reward:.0f}"
+        return (f"evaluation at step {state.num_timesteps}: {result.score:.3f}{reward} (best {state.best_evaluated:.3f}"
+                f"{best_reward} at step {state.best_evaluated_step})")
+
+    def probe(self, model, venv, probe: StageEndProbe, stage: Stage, state: CurriculumState, folder) -> EvaluationResult:
+        """The curriculum's stage-end probe of the policy in ``model`` (the one handed on)."""
+        result = self.run(model, venv, self._choice(probe.env, stage, probe.start_noise), probe.episodes)
+        folder.append_evaluations([self._record(result, state, stage, "probe", False)])
+        model.logger.record("probe/score", result.score)
+        model.logger.record("probe/median_solved_steps", result.median_solved_steps)
+        model.logger.record("probe/drop_rate", result.drop_rate)
+        return result
+
+    @staticmethod
+    def _record(result: EvaluationResult, state: CurriculumState, stage: Stage, kind: str,
+                best: bool) -> EvaluationRecord:
+        return EvaluationRecord(state.num_timesteps, state.stage_index, stage.name, kind, result.env, result.episodes,
+                                result.score, result.reward, result.drop_rate, result.median_solved_steps, best)
 
     def hand_off(self, model, venv, stage: Stage, state: CurriculumState, folder) -> tuple[int | None, str]:
         """At the stage's end, with ``hand_off: best``: evaluate the last policy too (unless it just
@@ -68,7 +131,8 @@ class StageEvaluator:
             return None, ""
         line = ""
         if self._last_step != state.num_timesteps:
-            line = f"{stage_label(state.stage_index, stage.name)} {self.evaluate(model, venv, stage, state, folder)}\n"
+            line = (f"{stage_label(state.stage_index, stage.name)} "
+                    f"{self.evaluate(model, venv, stage, state, folder, kind='final')}\n")
         best = state.best_evaluated_step
         if best is None or best == state.num_timesteps:
             return None, line.rstrip()

@@ -22,6 +22,7 @@ from myo_sds.curricula.advancement import (
     Decision,
     decide,
     episode_metric,
+    measured_value,
 )
 from myo_sds.curricula.schedule import ppo_settings_at
 from myo_sds.curricula.schema import (
@@ -59,6 +60,20 @@ class RolloutTiming:
     update_s: float
 
 
+def _log_rest_starts(logger, episodes) -> None:
+    """The rest-start signal: of a rollout's episodes that began with the balls where the hand
+    holds them (not placed on their targets), how many and their mean solved steps, by direction.
+    Rotation stages with ``rsi_probability`` < 1 have some; picking moving targets up from rest is
+    what the fixed-start stages then ask for."""
+    by_direction: dict[str, list[int]] = {}
+    for r in episodes:
+        if r.start == "rest":
+            by_direction.setdefault(r.direction or "all", []).append(r.solved_steps)
+    for direction, solved in by_direction.items():
+        logger.record(f"rest_start/{direction}_episodes", len(solved))
+        logger.record(f"rest_start/{direction}_solved_steps", float(np.mean(solved)))
+
+
 def _rollouts(config: RunConfig, model, stage: Stage, settings) -> RolloutCollector:
     """The config's rollout backend for ``model`` (whose env is the envs, or on Ray the holder
     of the merged normalization statistics)."""
@@ -93,7 +108,7 @@ class CurriculumTrainer:
                                           run_wall_s=lambda: self.state.wall_s + time.perf_counter() - self.iteration_started_at,
                                           update_threads=self.update_threads)
         self.minibatch_hook = model.policy.optimizer.register_step_pre_hook(self.episode_callback.before_optimizer_step)
-        self.stage_evaluator = StageEvaluator(config.curriculum.task)
+        self.stage_evaluator = StageEvaluator(config.curriculum)
         self.apply_ppo_settings()
 
     @property
@@ -241,7 +256,9 @@ class CurriculumTrainer:
                     self.progress_bar.write(f"{episode_callback.stop_requested}: saving a checkpoint; continue with "
                                             f"`python train.py --resume {self.run_dir}`")
                     break
-                self.progress_bar.describe(state.measured, self._rule_text(), model.num_timesteps)
+                rule = self.stage.advance
+                self.progress_bar.describe(measured_value(rule, state) if rule else state.measured, self._rule_text(),
+                                           model.num_timesteps)
                 if model.num_timesteps >= self.next_checkpoint and state.status is RunStatus.RUNNING:
                     self.save_checkpoint()
         finally:
@@ -279,6 +296,8 @@ class CurriculumTrainer:
         rule = self.stage.advance
         if rule is None:
             return "no advancement rule"
+        if rule.window_metric != rule.metric:
+            return f"{rule.metric} {{value}} of {rule.threshold:g} (latest evaluation)"
         return f"{rule.metric} {{value}} of {rule.threshold} over {len(self.state.recent)}/{rule.window} episodes"
 
     def _start_stage_display(self) -> None:
@@ -290,13 +309,14 @@ class CurriculumTrainer:
         model, state, episode_callback = self.model, self.state, self.episode_callback
         results = episode_callback.pop_results()
         rule = self.stage.advance
-        metric = rule.metric if rule else "score"
+        metric = rule.window_metric if rule else "score"
         window = rule.window if rule else 100
         state.record(self.stage.name, int(model.num_timesteps), (episode_metric(metric, r) for _, _, r in results),
                      window, rule.tracked_gain if rule else None)
         self.folder.append_episodes(
             EpisodeRecord(step, wall_s, state.stage_index, self.stage.name, r.score, r.solved_steps, r.length,
-                          r.dropped, r.effort, r.direction, r.start_phase) for step, wall_s, r in results)
+                          r.dropped, r.effort, r.direction, r.start_phase, r.reward, r.start)
+            for step, wall_s, r in results)
         logger = model.logger
         for key, value in episode_callback.pop_term_means().items():
             logger.record(f"reward/{key}", value)
@@ -305,6 +325,7 @@ class CurriculumTrainer:
             logger.record("rollout/score", float(np.mean([r.score for r in episodes])))
             logger.record("rollout/effort", float(np.mean([r.effort for r in episodes])))
             logger.record("rollout/drop_rate", float(np.mean([r.dropped for r in episodes])))
+            _log_rest_starts(logger, episodes)
         timing = self.timings[-1] if self.timings else None
         if timing and timing.wall_s > 0:
             logger.record("time/env_steps_per_s", timing.steps / timing.wall_s)
@@ -320,6 +341,8 @@ class CurriculumTrainer:
         logger.record("curriculum/stage_steps", state.stage_steps)
         if not math.isnan(state.measured):
             logger.record("curriculum/measured", state.measured)
+        if rule is not None and not math.isnan(measured_value(rule, state)) and rule.window_metric != rule.metric:
+            logger.record("curriculum/evaluated", measured_value(rule, state))
         evaluation = self.stage.evaluate
         if evaluation is not None and state.stage_steps >= (state.evaluations + 1) * evaluation.every:
             self._evaluate_stage()
@@ -338,11 +361,26 @@ class CurriculumTrainer:
             self.progress_bar.write(line)
         return handed
 
+    def _probe(self) -> dict | None:
+        """The curriculum's stage-end probe of the policy the stage hands on (None: no probe)."""
+        probe = self.config.curriculum.probe
+        if probe is None:
+            return None
+        result = self.stage_evaluator.probe(self.model, self.venv, probe, self.stage, self.state, self.folder)
+        self.progress_bar.write(f"{stage_label(self.state.stage_index, self.stage.name)} probe on {result.env}: score "
+                                f"{result.score:.3f}, median solved steps {result.median_solved_steps:.0f}, "
+                                f"{result.drop_rate:.0%} dropped ({result.episodes} episodes)")
+        return result.as_dict()
+
     def _transition(self, decision: Decision) -> None:
         state, model, config = self.state, self.model, self.config
         stage = self.stage
         handed_off = self._hand_off()  # a stopped run's final model is its best too
-        measured = state.end_stage(stage.name, decision.value, state.wall_s, handed_off).measured
+        self.folder.save_stage_policy(state.stage_index, stage.name, model, self.venv)
+        probe = self._probe()
+        transition = state.end_stage(stage.name, decision.value, state.wall_s, handed_off, probe)
+        rule = stage.advance
+        measured = transition.measured if rule is None or rule.window_metric == rule.metric else measured_value(rule, state)
         verdict = {Decision.PASSED: "passed", Decision.TIMED_OUT: "ended unpassed (max_steps)",
                    Decision.PLATEAUED: "ended unpassed (plateau_steps without a gain of plateau_gain)",
                    Decision.STOP: "ended unpassed"}[decision]
