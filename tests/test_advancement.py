@@ -11,6 +11,7 @@ from myo_sds.curricula.advancement import (
     Decision,
     decide,
     episode_metric,
+    measured_value,
 )
 from myo_sds.curricula.schema import AdvanceRule
 from myo_sds.curricula.state import CurriculumState
@@ -154,3 +155,34 @@ def test_same_seed_same_schedule():
     assert first == simulated_schedule(7, rules)
     assert [d for _, d in first] == ["passed", "timed_out", "passed"]
     assert first != simulated_schedule(8, rules)
+
+
+def test_an_evaluation_metric_passes_on_the_latest_evaluation_not_the_window():
+    rule = AdvanceRule(metric="eval_reward", threshold=983, window=4, max_steps=50_000)
+    state = progress([0.9] * 4, steps=10_000)  # a full window far above any score threshold
+    assert np.isnan(measured_value(rule, state)) and decide(rule, state) is Decision.STAY
+    assert state.record_evaluation(0.7, 900.0, select="reward")
+    assert decide(rule, state) is Decision.STAY
+    # A later evaluation with a lower score but a higher return is the best by return ...
+    state.record("s2", 12_000)
+    assert state.record_evaluation(0.6, 990.0, select="reward")
+    assert (state.best_evaluated, state.best_evaluated_reward, state.best_evaluated_step) == (0.6, 990.0, 12_000)
+    assert measured_value(rule, state) == 990.0 and decide(rule, state) is Decision.PASSED
+    # ... and the gate reads the latest one: a fall below it stays (the best is kept).
+    state.record("s2", 13_000)
+    assert not state.record_evaluation(0.8, 950.0, select="reward")
+    assert decide(rule, state) is Decision.STAY and state.best_evaluated_reward == 990.0
+    assert decide(AdvanceRule(metric="eval_score", threshold=0.8, window=4), state) is Decision.PASSED
+    # Selecting by score, the 0.8 evaluation would have been the best.
+    by_score = progress([0.9] * 4)
+    for score, reward in ((0.7, 900.0), (0.6, 990.0), (0.8, 950.0)):
+        by_score.record_evaluation(score, reward)
+    assert (by_score.best_evaluated, by_score.best_evaluated_reward) == (0.8, 950.0)
+    # The window still holds training scores (for display), whatever the rule's metric.
+    assert rule.window_metric == "score" and AdvanceRule(metric="survival").window_metric == "survival"
+    # The stage's evaluations are cleared for the next stage, and the state round-trips.
+    transition = state.end_stage("s2", Decision.PASSED.value, wall_s=1.0, probe={"median_solved_steps": 42.0})
+    assert transition.best_evaluated_reward == 990.0 and transition.probe == {"median_solved_steps": 42.0}
+    state.begin_next_stage()
+    assert state.last_evaluated_reward is None and state.best_evaluated_reward is None
+    assert CurriculumState.from_json(state.to_json()) == state

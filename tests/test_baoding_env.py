@@ -542,3 +542,24 @@ def test_recorded_starts_place_the_targets_on_the_restored_balls():
 def test_recorded_start_knob_names_the_problem(value, message):
     with pytest.raises(ValueError, match=message):
         BaodingKnobs.parse("p1", recorded_start=value)
+
+
+def test_episode_result_says_how_the_episode_began_and_sums_its_reward():
+    """``start``: on_targets where RSI placed the balls, rest where it did not; ``reward``: the sum
+    of the step rewards under the env's weights (here alive 1 + solved 5: hand-countable)."""
+    env = BaodingEnv(start_angle="uniform", rsi_probability=0.5, horizon=3,
+                     reward_weights={"alive": 1.0, "solved": 5.0})
+    kinds = set()
+    for seed in range(12):
+        obs, _ = env.reset(seed=seed)
+        placed = np.linalg.norm(obs[41:44]) < 1e-3
+        total = 0.0
+        for _ in range(3):
+            *_, reward, terminated, truncated, info = env.step(np.zeros(39, np.float32))
+            total += reward
+        result = info["episode_result"]
+        assert result.start == ("on_targets" if placed else "rest")
+        assert result.reward == pytest.approx(total)
+        assert result.reward == pytest.approx(result.length - int(result.dropped) + 5 * result.solved_steps)
+        kinds.add(result.start)
+    assert kinds == {"on_targets", "rest"}

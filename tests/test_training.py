@@ -431,3 +431,65 @@ def test_the_update_recomputes_the_rollout_s_log_probabilities_before_any_step(t
             compared += int(mask.sum())
     assert compared == model.n_steps * model.n_envs
     trainer.close()
+
+
+def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
+    """A stage that passes once an evaluation's mean return reaches its threshold, the winner's
+    way; the policy each stage hands on is kept and probed on another stage's task; episodes begun
+    with the balls at rest are counted by direction; all of it in evaluations.csv and --status."""
+    from myo_sds.evaluation.summary import format_summary, summarize
+
+    curriculum = CURRICULUM.replace(
+        "defaults: {direction: hold, period: static, rsi_probability: 1.0, start_angle: uniform}",
+        "defaults: {direction: hold, period: static, rsi_probability: 1.0, start_angle: uniform,\n"
+        "           reward_weights: {alive: 1.0, solved: 5.0}}\n"
+        "probe: {env: 'stage:hard', episodes: 2}").replace(
+        "advance: {metric: score, threshold: 0.01, window: 8}",
+        # An untrained policy's episodes earn a few alive steps: any return >= 1 passes.
+        "advance: {metric: eval_reward, threshold: 1, window: 8, max_steps: 2048}\n"
+        "    evaluate: {every: 128, episodes: 2, env: stage, select: reward}").replace(
+        "env: {direction: ccw, period: 20}", "env: {direction: random, period: 20, rsi_probability: 0.5}")
+    run = tmp_path / "run"
+    state = CurriculumTrainer.start(write_config(tmp_path, total=640, curriculum=curriculum),
+                                    run_dir=run, progress=False).run()
+    easy = state.history[0]
+    folder = RunFolder(run)
+    evaluations = folder.read_evaluations()
+    periodic = [e for e in evaluations if e.stage == "easy" and e.kind == "periodic"]
+    # Passed at its first evaluation (after the first rollout of 128 steps), on its return.
+    assert easy.decision == "passed" and easy.at_step == 128 and len(periodic) == 1
+    assert periodic[0].reward >= 1 and periodic[0].best and easy.best_evaluated_reward == periodic[0].reward
+    probes = [e for e in evaluations if e.kind == "probe"]
+    assert [(p.stage, p.env, p.episodes, p.step) for p in probes] == [("easy", "stage:hard", 2, 128)]
+    assert easy.probe == {"env": "stage:hard", "episodes": 2, "score": probes[0].score, "reward": probes[0].reward,
+                          "drop_rate": probes[0].drop_rate, "median_solved_steps": probes[0].median_solved_steps}
+    assert all(path.is_file() for path in folder.stage_policy_files(0, "easy"))
+    episodes = [e for e in folder.read_episodes() if e.stage == "hard"]
+    rest = [e for e in episodes if e.start == "rest"]
+    assert rest and len(rest) < len(episodes) and {e.start for e in episodes} == {"rest", "on_targets"}
+    assert all(e.reward is not None for e in episodes)
+    summary = summarize(run)
+    counted = summary.stages[1].rest_starts
+    assert sum(v["episodes"] for v in counted.values()) == len(rest) and set(counted) <= {"hold", "cw", "ccw"}
+    text = format_summary(summary)
+    assert "balls at rest" in text and "stage-end probe" in text and "eval return" in text
+    assert scalar_events(folder.tensorboard_dir, "eval/reward")
+    # A resumable export carries the evaluation log; a resume forgets evaluations past its checkpoint.
+    copy = folder.export_resumable(tmp_path / "carry")
+    assert copy.read_evaluations() == [e for e in evaluations if e.step <= state.num_timesteps]
+    folder.append_evaluations([replace(evaluations[0], step=10**9)])
+    CurriculumTrainer.resume(run, progress=False, total_steps=768).close()
+    assert folder.read_evaluations() == evaluations
+
+
+def test_an_evaluation_metric_needs_the_stage_evaluation_and_a_probe_a_known_env(tmp_path):
+    for old, new, message in (
+            ("advance: {metric: score, threshold: 0.01, window: 8}", "advance: {metric: eval_score, threshold: 0.5}",
+             "stage 1 \\(easy\\) advance.metric: eval_score needs the stage's evaluate"),
+            ("advance: {metric: score, threshold: 0.01, window: 8}", "advance: {metric: eval_score, threshold: 2}",
+             "advance.threshold: must be in \\[0, 1\\] for eval_score"),
+            ("stages:", "probe: {env: 'stage:nope'}\nstages:", "probe.env: no stage named 'nope'; stages: easy, hard"),
+            ("stages:", "probe: {env: p3}\nstages:", "probe.env: 'p3' is not stage:NAME or one of p1, p1_2022, p2")):
+        with pytest.raises(ConfigError, match=message):
+            CurriculumTrainer.start(write_config(tmp_path, total=256, curriculum=CURRICULUM.replace(old, new)),
+                                    run_dir=tmp_path / "bad", overwrite=True, progress=False)

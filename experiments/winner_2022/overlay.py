@@ -1,0 +1,127 @@
+"""Our chain's stage evaluations over the 2022 winner's, stage by stage, on the same scale.
+
+Both are the mean return of 20 deterministic episodes on the stage's own task (their reward
+weights: pos_dist 1 + 1, alive 1, solved 5; an episode's maximum is ~1,200) against env steps
+in the stage. Theirs come from `evaluations.csv` beside this file (`extract.py`); ours from a
+run folder's `evaluations.csv` (`configs/baoding_sds.yaml`, whose stages follow theirs). Prints,
+per stage, ours and theirs at our latest evaluated step (each the mean of the evaluations
+within +-200k env steps of it) and their ratio; draws one panel per stage.
+
+    python experiments/winner_2022/overlay.py ~/runs/baoding_sds-s0 --out experiments/winner_2022/overlay.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from myo_sds.run_folder import RunFolder
+
+HERE = Path(__file__).resolve().parent
+# Our stage -> their stages (in order; a later one continues the earlier one's step count).
+THEIR_STAGES = {"hold-rsi": (1,), "rotate-30s": (2,), "rotate-25s": (3,), "rotate-20s": (4,), "rotate-15s": (5,),
+                "fixed-10s": (6,), "fixed-9s": (7,), "fixed-8s": (8,), "fixed-7s": (9, 10), "fixed-6s": (11,),
+                "fixed-5s": (12,)}
+COMPARE_SPAN = 200_000  # env steps either side of a step whose evaluations are averaged
+
+
+def their_curves() -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per our stage name: (env steps in the stage, their mean evaluation return)."""
+    by_stage: dict[int, list[tuple[int, float]]] = {}
+    with (HERE / "evaluations.csv").open(newline="") as file:
+        for row in csv.DictReader(file):
+            by_stage.setdefault(int(row["stage"]), []).append((int(row["step"]), float(row["mean_return"])))
+    curves = {}
+    for name, numbers in THEIR_STAGES.items():
+        steps, values, offset = [], [], 0
+        for number in numbers:
+            rows = by_stage[number]
+            steps += [offset + s for s, _ in rows]
+            values += [v for _, v in rows]
+            offset = steps[-1]
+        curves[name] = (np.array(steps), np.array(values))
+    return curves
+
+
+def our_curves(run_dir: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per stage name of the run: (env steps in the stage, mean evaluation return)."""
+    folder = RunFolder(run_dir)
+    records = [r for r in folder.read_evaluations() if r.kind in ("periodic", "final") and r.reward is not None]
+    starts: dict[int, int] = {}
+    state = folder.read_state()
+    if state is not None:
+        starts = dict(enumerate(state.stage_starts()))
+    curves: dict[str, tuple[list[int], list[float]]] = {}
+    for r in records:
+        steps, values = curves.setdefault(r.stage, ([], []))
+        steps.append(r.step - starts.get(r.stage_index, 0))
+        values.append(r.reward)
+    return {name: (np.array(s), np.array(v)) for name, (s, v) in curves.items()}
+
+
+def near(steps: np.ndarray, values: np.ndarray, at: int) -> float:
+    mask = np.abs(steps - at) <= COMPARE_SPAN
+    return float(values[mask].mean()) if mask.any() else float("nan")
+
+
+def compare(ours: dict, theirs: dict) -> list[str]:
+    lines = [f"{'stage':<12} {'at':>7} {'ours':>6} {'theirs':>6} {'ratio':>6}  best ours / theirs"]
+    for name, (steps, values) in ours.items():
+        if name not in theirs or not len(steps):
+            continue
+        t_steps, t_values = theirs[name]
+        at = int(steps[-1])
+        # Their first evaluation came after 40k env steps of the stage (480k in stage 1).
+        mine, yours = near(steps, values, at), near(t_steps, t_values, max(at, int(t_steps[0])))
+        lines.append(f"{name:<12} {at / 1e6:>6.2f}M {mine:>6.0f} {yours:>6.0f} {mine / yours:>6.2f}  "
+                     f"{values.max():.0f} / {t_values.max():.0f}")
+    return lines
+
+
+def plot(ours: dict, theirs: dict, path: Path, label: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(THEIR_STAGES)
+    fig, axes = plt.subplots(3, 4, figsize=(16, 10), sharey=True)
+    for ax, name in zip(axes.flat, names):
+        t_steps, t_values = theirs[name]
+        ax.plot(t_steps / 1e6, t_values, color="0.55", lw=1, label="2022 winner")
+        ax.axhline(t_values.max(), color="0.55", lw=0.8, ls=":")
+        if name in ours:
+            steps, values = ours[name]
+            ax.plot(steps / 1e6, values, color="tab:blue", lw=1.2, label=label)
+        ax.set_title(name, fontsize=10)
+        ax.grid(alpha=0.3)
+    axes.flat[-1].axis("off")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("evaluation return (20 episodes)")
+    for ax in axes[-1]:
+        ax.set_xlabel("env steps in the stage (M)")
+    axes.flat[0].legend(fontsize=8, loc="lower right")
+    fig.suptitle("Stage evaluations: the 2022 winner's chain (grey; dotted: its best, our stage's early pass) and ours")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("run", type=Path, help="a run folder (or a resumable export) of configs/baoding_sds.yaml")
+    parser.add_argument("--out", type=Path, default=HERE / "overlay.png", help="the figure (PNG)")
+    parser.add_argument("--label", default=None, help="our curve's legend (default: the run folder's name)")
+    args = parser.parse_args()
+    ours, theirs = our_curves(args.run), their_curves()
+    print("\n".join(compare(ours, theirs)))
+    plot(ours, theirs, args.out, args.label or args.run.name)
+    print(f"figure: {args.out}")
+
+
+if __name__ == "__main__":
+    main()
