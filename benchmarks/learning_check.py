@@ -45,19 +45,23 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 WINDOW = 100
-# The stage passes on its training episodes' score (the measure of the results recorded so far),
-# whatever rule the config's curriculum gives it; no stage evaluation or probe takes time.
+# A first stage that passes on its evaluations (configs/baoding_sds.yaml's) is measured on its
+# training episodes' score instead, as the results recorded so far were; no stage evaluation or
+# probe takes time.
 FIRST_STAGE_RULE = {"metric": "score", "threshold": 0.6, "window": 200}
 
 
 def first_stage_curriculum(config: Path, folder: Path) -> Path:
-    """A copy of the config's curriculum reduced to its first stage, passed at FIRST_STAGE_RULE."""
+    """A copy of the config's curriculum reduced to its first stage, without evaluations (an
+    evaluation-gated stage passed at FIRST_STAGE_RULE)."""
     from myo_sds.curricula.schema import load_run_config
 
     run = load_run_config(config)
     raw = yaml.safe_load(run.curriculum_path.read_text())
     stage = dict(raw["stages"][0])
-    stage["advance"] = {**FIRST_STAGE_RULE, "max_steps": stage.get("advance", {}).get("max_steps", 10_000_000)}
+    advance = stage.get("advance") or {}
+    if str(advance.get("metric", "")).startswith("eval_"):
+        stage["advance"] = {**FIRST_STAGE_RULE, "max_steps": advance.get("max_steps", 10_000_000)}
     stage.pop("evaluate", None)
     raw.pop("probe", None)
     raw["stages"] = [stage]

@@ -71,7 +71,7 @@ def run_reference(steps: int, n_envs: int, config: Path | None = None) -> dict[s
     from sb3_contrib import RecurrentPPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
-    from myo_sds.run_settings import PolicyConfig, PpoConfig
+    from myo_sds.curricula.run_settings import PolicyConfig, PpoConfig
 
     policy, ppo = PolicyConfig(), PpoConfig()
     if config is not None:

@@ -12,13 +12,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from myo_sds.curricula.run_settings import STAGE_PPO_SETTINGS, LearningRateDecay
 from myo_sds.curricula.schema import RunConfig
-from myo_sds.run_settings import LearningRateDecay
 
 
 @dataclass(frozen=True)
 class PpoSettings:
-    """What the trainer applies to the model before each rollout."""
+    """What the trainer applies to the model before each rollout: the stage-changeable settings
+    (``STAGE_PPO_SETTINGS``), the learning rate as a number at this step."""
 
     learning_rate: float
     n_steps: int
@@ -36,14 +37,13 @@ def ppo_settings_at(config: RunConfig, stage_index: int, stage_starts: Sequence[
         stage_starts: the env step at which each stage up to ``stage_index`` began.
     """
     base = config.ppo
-    values = {"n_steps": base.n_steps, "batch_size": base.batch_size, "n_epochs": base.n_epochs,
-              "clip_range": base.clip_range, "ent_coef": base.ent_coef, "target_kl": base.target_kl}
+    values = {name: getattr(base, name) for name in STAGE_PPO_SETTINGS if name != "learning_rate"}
     rate, rate_set_at = base.learning_rate, 0
     for index, stage in enumerate(config.curriculum.stages[: stage_index + 1]):
         overrides = stage.ppo.as_dict()
-        values.update({k: v for k, v in overrides.items() if k in values})
-        if stage.ppo.learning_rate is not None:
-            rate, rate_set_at = stage.ppo.learning_rate, stage_starts[index]
+        if "learning_rate" in overrides:
+            rate, rate_set_at = overrides.pop("learning_rate"), stage_starts[index]
+        values.update(overrides)
     warmup = base.warmup
     if warmup.active(step):
         values.update({k: v for k in ("n_steps", "batch_size", "n_epochs") if (v := getattr(warmup, k)) is not None})

@@ -13,19 +13,18 @@ from typing import Any
 
 import yaml
 
-from myo_sds.curricula.yaml_reader import ConfigError, YamlReader, merge_bases
-from myo_sds.declare import integer, number, one_of, optional, read_settings, setting, text
-from myo_sds.envs.knobs import TaskKnobs
-from myo_sds.envs.task_specs import TASK_SPECS
-from myo_sds.run_settings import (
-    LearningRate,
+from myo_sds.curricula.run_settings import (
+    STAGE_PPO_SETTINGS,
     NormalizeConfig,
     PolicyConfig,
     PpoConfig,
     RolloutConfig,
     RunSettings,
-    learning_rate,
 )
+from myo_sds.curricula.yaml_reader import ConfigError, YamlReader
+from myo_sds.envs.declare import integer, number, one_of, optional, overrides_of, read_settings, setting, text
+from myo_sds.envs.knobs import TaskKnobs
+from myo_sds.envs.task_specs import TASK_SPECS
 
 # score and survival: the mean over the stage's last `window` training episodes; eval_score and
 # eval_reward: the stage's latest periodic evaluation (its `evaluate`), mean official score or return.
@@ -100,20 +99,10 @@ class StageEndProbe:
     start_noise: float = setting(0.0, parse=number(low=0), help="rad: each hand joint moved by up to this at reset")
 
 
-@dataclass(frozen=True)
-class PpoOverrides:
-    """PPO settings a stage changes at its start (None: keep the current value)."""
-
-    learning_rate: LearningRate | None = setting(None, parse=learning_rate, help="a rate, or {start, end, steps}")
-    n_steps: int | None = setting(None, parse=integer(low=1), help="rollout steps per env")
-    batch_size: int | None = setting(None, parse=integer(low=1), help="samples per minibatch")
-    clip_range: float | None = setting(None, parse=number(low=0, strict_low=True), help="PPO's clip range")
-    ent_coef: float | None = setting(None, parse=number(low=0), help="entropy bonus")
-    n_epochs: int | None = setting(None, parse=integer(low=1), help="passes over each rollout")
-    target_kl: float | None = setting(None, parse=number(low=0, strict_low=True), help="SB3's early stop of an update")
-
-    def as_dict(self) -> dict[str, float | int]:
-        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
+PpoOverrides = overrides_of(
+    PpoConfig, STAGE_PPO_SETTINGS, "PpoOverrides",
+    """PPO settings a stage changes at its start (unset: keep the current value; ``null`` turns an
+    optional one off, e.g. ``target_kl``), each read as the run config's ``ppo`` reads it.""")
 
 
 @dataclass(frozen=True)
@@ -122,7 +111,7 @@ class Stage:
     env: Mapping[str, Any]  # the knobs as the curriculum writes them (defaults merged in)
     distribution: TaskKnobs  # the same, checked and read once: what every env of the stage gets
     advance: AdvanceRule | None  # None: train on this stage until the step budget ends
-    ppo: PpoOverrides = PpoOverrides()
+    ppo: PpoOverrides = PpoOverrides()  # type: ignore[valid-type]
     evaluate: StageEvaluation | None = None  # periodic deterministic evaluation and best-model hand-off
 
 
@@ -133,18 +122,19 @@ class Curriculum:
     stages: tuple[Stage, ...]
     path: Path | None = None
     probe: StageEndProbe | None = None  # evaluated at each stage's end
+    # The mapping read, when it differs from the file (bases merged, --set applied); None: the file.
+    resolved: Mapping[str, Any] | None = None
+    # Where each value came from (dotted key -> a file or a --set), for --print-config.
+    origins: Mapping[str, str] = field(default_factory=dict)
 
     def file_text(self) -> str:
         """The curriculum as one self-contained file, for a run folder's own copy: the file as
-        written (comments kept), or, when it inherits with ``base:``, the merged mapping."""
-        text = self.path.read_text()
-        merged, origins = merge_bases(self.path, "curriculum")
-        if not origins:
-            return text
-        merged["name"] = self.name
-        return (f"# {self.path.name} merged with its base files (base:): the curriculum this run follows\n"
-                + yaml.safe_dump({key: merged[key] for key in CURRICULUM_KEYS if key in merged},
-                                 sort_keys=False))
+        written (comments kept), or, when it inherits with ``base:`` or a ``--set`` changed it,
+        the resolved mapping."""
+        if self.resolved is None:
+            return self.path.read_text()
+        return (f"# {self.path.name} resolved (its base files merged, --set applied): the curriculum this run follows\n"
+                + yaml.safe_dump(dict(self.resolved), sort_keys=False))
 
     def stage_index(self, name: str) -> int:
         for index, stage in enumerate(self.stages):
@@ -158,7 +148,7 @@ class Curriculum:
 class RunConfig:
     curriculum: Curriculum
     curriculum_path: Path
-    # The top level's values (myo_sds.run_settings.RunSettings, where each is declared).
+    # The top level's values (myo_sds.curricula.run_settings.RunSettings, where each is declared).
     seed: int = RunSettings.seed
     n_envs: int = RunSettings.n_envs
     vec_env: str = RunSettings.vec_env
@@ -174,6 +164,7 @@ class RunConfig:
     normalize: NormalizeConfig = NormalizeConfig()
     rollout: RolloutConfig = RolloutConfig()
     source: Mapping[str, Any] = field(default_factory=dict)  # the YAML as read, for the run folder
+    origins: Mapping[str, str] = field(default_factory=dict)  # dotted key -> its file or --set
 
 
 # -- curriculum --------------------------------------------------------------------------
@@ -235,15 +226,22 @@ def _probe(reader: YamlReader, task: str, raw: Any, stage_names: tuple[str, ...]
     return probe
 
 
-def load_curriculum(path: str | Path) -> Curriculum:
-    """Read and validate a curriculum file (see README, "Writing a curriculum").
+CURRICULUM_SET_KEYS = ("defaults", "probe", "stages")  # what --set may change in a curriculum
+STAGE_KEYS = ("name", "env", "advance", "ppo", "evaluate")
+
+
+def load_curriculum(path: str | Path, overrides: tuple[str, ...] = ()) -> Curriculum:
+    """Read and validate a curriculum file (see README, "Writing a curriculum"), with ``--set``
+    overrides such as ``stages.hold-rsi.advance.threshold=0.7`` or ``defaults.drop_height=1.3``.
 
     Raises:
         ConfigError: for a missing file, bad YAML, or any bad key or value.
     """
     path = Path(path)
     reader = YamlReader(path)
-    raw = reader.mapping("", reader.read_with_bases("curriculum"), CURRICULUM_KEYS)
+    raw = dict(reader.mapping("", reader.read_with_bases("curriculum"), CURRICULUM_KEYS))
+    for assignment in overrides:
+        reader.set_value(raw, assignment, CURRICULUM_SET_KEYS)
     if not raw:
         raise reader.error("", "the curriculum file is empty")
     task = reader.read("task", raw.get("task", "baoding"), one_of(*TASK_SPECS))
@@ -254,52 +252,53 @@ def load_curriculum(path: str | Path) -> Curriculum:
     if not isinstance(stages_raw, list) or not stages_raw:
         raise reader.error("stages", "expected a non-empty list of stages")
     stages, seen = [], set()
-    # An error in a stage names the file that wrote the stage list (a base's, when inherited).
-    top_reader = reader
-    reader = YamlReader(reader.origins["stages"]) if "stages" in reader.origins else reader
     for index, stage_raw in enumerate(stages_raw):
         key = stage_label(index)  # stages count from 1, as on the console
-        stage_raw = reader.mapping(key, stage_raw, ("name", "env", "advance", "ppo", "evaluate"))
+        stage_raw = reader.mapping(key, stage_raw, STAGE_KEYS)
         stage_name = reader.read(f"{key} name", stage_raw.get("name", f"stage_{index + 1}"), text)
         if stage_name in seen:
             raise reader.error(f"{key} name", f"duplicate stage name {stage_name!r}")
         seen.add(stage_name)
         key = stage_label(index, stage_name)
-        overrides = reader.mapping(f"{key} env", stage_raw.get("env"), ("preset", *TASK_SPECS[task].knobs.help()))
-        env = {**defaults, **overrides}
-        distribution = _stage_distribution(reader, f"{key} env", task, env)
-        advance = _advance_rule(reader, f"{key} advance", stage_raw.get("advance"))
-        ppo = read_settings(reader, f"{key} ppo", stage_raw.get("ppo"), PpoOverrides)
-        evaluation = _stage_evaluation(reader, f"{key} evaluate", task, stage_raw.get("evaluate"))
-        if advance is not None and advance.metric in EVALUATION_METRICS and evaluation is None:
-            raise reader.error(f"{key} advance.metric", f"{advance.metric} needs the stage's evaluate (none is set)")
-        stages.append(Stage(stage_name, env, distribution, advance, ppo, evaluation))
-    probe = _probe(top_reader, task, raw.get("probe"), tuple(s.name for s in stages))
-    return Curriculum(name=name, task=task, stages=tuple(stages), path=path, probe=probe)
+        # An error in a stage names the file that last wrote it (a base's, when inherited).
+        stage_reader = reader.stage_reader(stage_name, key)
+        stages.append(_stage(stage_reader, key, task, stage_name, stage_raw, defaults))
+    probe = _probe(reader, task, raw.get("probe"), tuple(s.name for s in stages))
+    changed = bool(reader.origins or reader.overrides)
+    if changed:
+        raw["name"] = name
+    origins = {dotted: reader.origin(dotted) for dotted in _flat_keys(raw)}
+    return Curriculum(name=name, task=task, stages=tuple(stages), path=path, probe=probe,
+                      resolved={k: raw[k] for k in CURRICULUM_KEYS if k in raw} if changed else None, origins=origins)
+
+
+def _stage(reader: YamlReader, key: str, task: str, name: str, raw: Mapping[str, Any],
+           defaults: Mapping[str, Any]) -> Stage:
+    overrides = reader.mapping(f"{key} env", raw.get("env"), ("preset", *TASK_SPECS[task].knobs.help()))
+    env = {**defaults, **overrides}
+    distribution = _stage_distribution(reader, f"{key} env", task, env)
+    advance = _advance_rule(reader, f"{key} advance", raw.get("advance"))
+    ppo = read_settings(reader, f"{key} ppo", raw.get("ppo"), PpoOverrides)
+    evaluation = _stage_evaluation(reader, f"{key} evaluate", task, raw.get("evaluate"))
+    if advance is not None and advance.metric in EVALUATION_METRICS and evaluation is None:
+        raise reader.error(f"{key} advance.metric", f"{advance.metric} needs the stage's evaluate (none is set)")
+    return Stage(name, env, distribution, advance, ppo, evaluation)
+
+
+def _flat_keys(mapping: Mapping[str, Any], prefix: str = "") -> list[str]:
+    """Dotted keys of a resolved mapping's leaves, a curriculum's stages as ``stages.NAME.key``."""
+    keys = []
+    for name, value in mapping.items():
+        dotted = f"{prefix}{name}"
+        if not prefix and name == "stages" and isinstance(value, list):
+            value = {stage.get("name"): {k: v for k, v in stage.items() if k != "name"} for stage in value}
+        keys += _flat_keys(value, dotted + ".") if isinstance(value, Mapping) and value else [dotted]
+    return keys
 
 
 # -- run config --------------------------------------------------------------------------
 
 RUN_KEYS = ("curriculum", *(f.name for f in fields(RunSettings)), "policy", "ppo", "normalize", "rollout")
-
-
-def _set_key(reader: YamlReader, raw: dict[str, Any], assignment: str) -> None:
-    """Apply one ``a.b=value`` override (value parsed as YAML) to the raw config."""
-    if "=" not in assignment:
-        raise ConfigError(f"--set {assignment}: expected key=value, e.g. ppo.learning_rate=3e-4")
-    dotted, text = assignment.split("=", 1)
-    keys = dotted.strip().split(".")
-    reader.overrides[".".join(keys)] = assignment
-    reader.mapping("", {keys[0]: None}, RUN_KEYS)
-    node = raw
-    for depth, key in enumerate(keys[:-1]):
-        node = node.setdefault(key, {})
-        if not isinstance(node, dict):
-            raise ConfigError(f"--set {assignment}: {'.'.join(keys[:depth + 1])} is not a mapping")
-    try:
-        node[keys[-1]] = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise ConfigError(f"--set {assignment}: not a valid YAML value: {error}") from None
 
 
 def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunConfig:
@@ -311,8 +310,10 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     path = Path(path)
     reader = YamlReader(path)
     raw = dict(reader.mapping("", reader.read_with_bases("run config"), RUN_KEYS))
+    curriculum_overrides = tuple(a for a in overrides if a.split(".", 1)[0].split("=", 1)[0] in CURRICULUM_SET_KEYS)
     for assignment in overrides:
-        _set_key(reader, raw, assignment)
+        if assignment not in curriculum_overrides:
+            reader.set_value(raw, assignment, RUN_KEYS + CURRICULUM_SET_KEYS)
     reader.mapping("", raw, RUN_KEYS)
     if "curriculum" not in raw:
         raise reader.error("curriculum", "missing: the curriculum file this run follows")
@@ -346,8 +347,9 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
                                f"{rollout_config.workers} workers gives {per_worker})")
         values["rollout"] = RolloutConfig(**{**rollout_config.__dict__, "envs_per_worker": per_worker})
         values["n_envs"] = rollout_config.workers * per_worker
-    curriculum = load_curriculum(curriculum_path)
-    config = RunConfig(curriculum=curriculum, curriculum_path=curriculum_path, source=raw, **values)
+    curriculum = load_curriculum(curriculum_path, curriculum_overrides)
+    origins = {dotted: reader.origin(dotted) for dotted in _flat_keys(raw)}
+    config = RunConfig(curriculum=curriculum, curriculum_path=curriculum_path, source=raw, origins=origins, **values)
     rollout = config.ppo.n_steps * config.n_envs
     if config.ppo.batch_size > rollout:
         raise reader.error("ppo.batch_size", f"{config.ppo.batch_size} exceeds the rollout size "
@@ -360,8 +362,8 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
                            f"n_steps x n_envs = {warmup_rollout}")
     n_steps, batch_size = config.ppo.n_steps, config.ppo.batch_size
     for index, stage in enumerate(curriculum.stages):  # overrides stay in force until changed
-        n_steps = stage.ppo.n_steps or n_steps
-        batch_size = stage.ppo.batch_size or batch_size
+        n_steps = stage.ppo.as_dict().get("n_steps", n_steps)
+        batch_size = stage.ppo.as_dict().get("batch_size", batch_size)
         if batch_size > n_steps * config.n_envs:
             raise ConfigError(f"{curriculum_path}: {stage_label(index, stage.name)} ppo: batch_size {batch_size} exceeds the "
                               f"rollout size n_steps x n_envs = {n_steps} x {config.n_envs} of this run ({path})")

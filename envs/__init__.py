@@ -2,14 +2,11 @@
 bundled task (``myosds/BaodingP1-v0``, ...; :mod:`myo_sds.envs.task_specs`).
 
 The env classes (and MuJoCo) load on first use, so the task knobs can be read without them.
+Rendering offscreen needs an OpenGL backend chosen before MuJoCo loads, e.g. ``MUJOCO_GL=egl``
+(the command lines set it: :func:`myo_sds.set_process_environment`).
 """
 
-import os
-
-# Headless offscreen rendering by default; mujoco reads this when it is first imported.
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-from myo_sds.envs.task_specs import TASK_SPECS  # noqa: E402  (registers the gymnasium ids)
+from myo_sds.envs.task_specs import TASK_SPECS  # registers the gymnasium ids
 
 # Each bundled task's env class by its name (BaodingEnv, DieEnv), imported on first use.
 _LAZY = {spec.env_path.split(":")[1]: spec.env_path for spec in TASK_SPECS.values()}

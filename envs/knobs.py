@@ -9,12 +9,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
 
-from myo_sds.declare import Parser, describe, number, one_of, optional, setting  # noqa: F401  (the knobs' helpers)
+from myo_sds.envs.declare import (  # noqa: F401  (the knobs' helpers)
+    Parser,
+    boolean,
+    describe,
+    number,
+    one_of,
+    optional,
+    parse_settings,
+    setting,
+)
 
 # A finite float from a number or numeric string, else ``ValueError`` naming the knob.
 to_float: Parser = number()
@@ -150,12 +159,15 @@ class RecordedStart:
     (``--resume``) and refills as the episodes go on.
     """
 
-    probability: float
-    capacity: int = 1000
-    every: int = 4
-    solved_only: bool = True
+    probability: float = setting(MISSING, parse=lambda name, value: parse_probability(name, value),
+                                 help="the share of resets from a recorded state")
+    capacity: int = setting(1000, parse=lambda name, value: count()(name, value), help="states kept per env")
+    every: int = setting(4, parse=lambda name, value: count()(name, value), help="control steps between offers")
+    solved_only: bool = setting(True, parse=boolean, help="offer solved steps only")
 
-    FIELDS: ClassVar[tuple[str, ...]] = ("probability", "capacity", "every", "solved_only")
+    def __post_init__(self) -> None:
+        if self.probability == 0:
+            raise ValueError("probability: must be > 0 (write null to turn recorded starts off)")
 
 
 def recorded_start_setting(what: str):
@@ -174,18 +186,7 @@ def parse_recorded_start(name: str, value: Any) -> RecordedStart:
     if not isinstance(value, Mapping):
         raise ValueError(f"{name}: expected a mapping like {{probability: 0.5, capacity: 1000, every: 4}}, "
                          f"got {value!r}")
-    check_known(f"field of {name}", value, RecordedStart.FIELDS)
-    if "probability" not in value:
-        raise ValueError(f"{name}: 'probability' is required (the share of resets from a recorded state)")
-    probability = parse_probability(f"{name}.probability", value["probability"])
-    if probability == 0:
-        raise ValueError(f"{name}.probability: must be > 0 (write null to turn recorded starts off)")
-    solved_only = value.get("solved_only", True)
-    if not isinstance(solved_only, bool):
-        raise ValueError(f"{name}.solved_only: expected true or false, got {solved_only!r}")
-    whole = count()
-    return RecordedStart(probability, whole(f"{name}.capacity", value.get("capacity", 1000)),
-                         whole(f"{name}.every", value.get("every", 4)), solved_only)
+    return parse_settings(name, value, RecordedStart)
 
 
 # -- declaring a task's knobs --------------------------------------------------------------
@@ -195,7 +196,7 @@ DEFAULT_PRESET = "p1"
 
 class TaskKnobs:
     """Base of a task's knob dataclass (``@dataclass(frozen=True)`` subclasses whose fields are
-    :func:`~myo_sds.declare.setting` declarations). ``parse`` turns a preset and written values into an instance."""
+    :func:`~myo_sds.envs.declare.setting` declarations). ``parse`` turns a preset and written values into an instance."""
 
     KIND: ClassVar[str]  # "Baoding knob", in error messages
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]]  # preset name -> written values

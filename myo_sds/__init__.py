@@ -11,29 +11,32 @@ The package's parts, along the data path:
 - ``myo_sds.evaluation``: official metrics, plots and videos of checkpoints;
 - ``myo_sds.cli``: the ``myo-sds-train`` and ``myo-sds-evaluate`` commands.
 
-In a source checkout ``envs/``, ``curricula/`` and ``configs/`` sit at the top of the repository,
-beside this folder; an installed wheel has them inside the package. Either way they are
-imported as ``myo_sds.envs`` and ``myo_sds.curricula`` (a top-level ``envs`` would clash with
-other projects' in site-packages).
+``envs/``, ``curricula/`` and ``configs/`` sit at the top of the repository, beside this folder,
+where users find and edit them; ``pyproject.toml`` declares them as the subpackages
+``myo_sds.envs``, ``myo_sds.curricula`` and ``myo_sds.configs`` (a top-level ``envs`` would clash
+with other projects' in site-packages), so an installed wheel has them inside the package and an
+editable install (``pip install -e .``) maps the names to the folders.
+
+Importing any module of the package sets no environment variable: the command lines call
+:func:`set_process_environment` first thing, before NumPy, torch and MuJoCo load.
 """
 
 import os as _os
 from pathlib import Path as _Path
 
 _PACKAGE = _Path(__file__).resolve().parent
-if not (_PACKAGE / "envs").is_dir():  # a source checkout: the subpackages are at the top
-    __path__.append(str(_PACKAGE.parent))  # noqa: F821  (the package's own search path)
 
 
 def process_environment() -> dict[str, str]:
     """The environment variables a process that trains or evaluates sets before NumPy, torch
     and MuJoCo load: their AVX2 kernels (the same results on every AVX2 CPU,
     ``myo_sds/numerics.py``) and a short OpenMP spin (``myo_sds/threads.py``). A variable the
-    user set is left as it is."""
+    user set is left as it is. Rendering is headless (EGL), as MuJoCo reads ``MUJOCO_GL`` when it
+    is first imported."""
     from myo_sds.numerics import KERNEL_PINS
     from myo_sds.threads import OPENMP_SPIN
 
-    return {**KERNEL_PINS, **OPENMP_SPIN}
+    return {**KERNEL_PINS, **OPENMP_SPIN, "MUJOCO_GL": "egl"}
 
 
 def set_process_environment() -> None:

@@ -531,7 +531,7 @@ def test_recorded_starts_place_the_targets_on_the_restored_balls():
 
 
 @pytest.mark.parametrize("value, message", [
-    ({"capacity": 10}, "'probability' is required"),
+    ({"capacity": 10}, "recorded_start.probability: missing: the share of resets"),
     ({"probability": 1.5}, "a probability must be in"),
     ({"probability": 0}, "must be > 0"),
     ({"probability": 0.5, "capacity": 0}, "recorded_start.capacity: expected a whole number"),

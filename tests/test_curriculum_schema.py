@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from myo_sds.curricula.run_settings import LearningRateDecay, PpoWarmup
 from myo_sds.curricula.schema import ConfigError, load_curriculum, load_run_config
-from myo_sds.run_settings import LearningRateDecay, PpoWarmup
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -127,11 +127,11 @@ def test_good_curriculum_is_parsed_with_defaults_merged(tmp_path):
     ("task: baoding", "task: juggling", "task: 'juggling' is not one of baoding"),
     ("  - name: b", "  - name: a", "stage 2 name: duplicate stage name 'a'"),
     ("    ppo: {learning_rate: 1e-4, n_steps: 64}", "    ppo: {lr: 1e-4}",
-     "stage 2 (b) ppo.lr: unknown key; allowed: learning_rate, n_steps, batch_size, clip_range, ent_coef, n_epochs, "
+     "stage 2 (b) ppo.lr: unknown key; allowed: learning_rate, n_steps, batch_size, n_epochs, clip_range, ent_coef, "
      "target_kl"),
     ("max_steps: 1000,", "max_steps: 50,", "stage 2 (b) advance.max_steps: 50 is below min_steps 100"),
     ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 1e-4},",
-     "stage 2 (b) ppo.learning_rate: a learning-rate decay needs start, end, steps; missing: steps"),
+     "stage 2 (b) ppo.learning_rate.steps: missing: env steps from start to end"),
     ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 1e-4, stesp: 10},",
      "stage 2 (b) ppo.learning_rate.stesp: unknown key (did you mean 'steps'?); allowed: start, end, steps"),
     ("learning_rate: 1e-4,", "learning_rate: {start: 1e-3, end: 0, steps: 10},",
@@ -283,17 +283,129 @@ def test_a_stage_changes_epochs_and_target_kl_until_a_later_stage_does(tmp_path)
 def test_every_setting_is_declared_one_way_with_a_parser_and_a_meaning():
     from dataclasses import fields
 
-    from myo_sds import run_settings
-    from myo_sds.curricula import schema
+    from myo_sds.curricula import run_settings, schema
     from myo_sds.envs.baoding_task import BaodingKnobs
     from myo_sds.envs.die_task import DieKnobs
+    from myo_sds.envs.knobs import RecordedStart
 
     declared = (run_settings.RunSettings, run_settings.PolicyConfig, run_settings.PpoConfig,
                 run_settings.NormalizeConfig, run_settings.RolloutConfig, schema.AdvanceRule, schema.StageEvaluation,
-                schema.PpoOverrides, BaodingKnobs, DieKnobs)
+                schema.PpoOverrides, schema.StageEndProbe, run_settings.LearningRateDecay, run_settings.PpoWarmup,
+                RecordedStart, BaodingKnobs, DieKnobs)
     for cls in declared:
         for field in fields(cls):
             assert callable(field.metadata.get("parse")), f"{cls.__name__}.{field.name}"
             assert field.metadata.get("help"), f"{cls.__name__}.{field.name}"
     # The run config's top level is read through them too: a bad value names the file and key.
     assert set(schema.RUN_KEYS) >= {f.name for f in fields(run_settings.RunSettings)}
+
+
+def test_a_variant_changes_one_stage_by_name_and_keeps_the_rest(tmp_path):
+    """Three lines change one threshold; every other setting of that stage and the other stages stay."""
+    write(tmp_path, GOOD_CURRICULUM, "base.yaml")
+    variant = write(tmp_path, "base: base.yaml\nstages:\n  b: {advance: {threshold: 0.7}}\n", "variant.yaml")
+    base, changed = load_curriculum(tmp_path / "base.yaml"), load_curriculum(variant)
+    assert [s.name for s in changed.stages] == ["a", "b"] and changed.stages[0] == base.stages[0]
+    b, base_b = changed.stages[1], base.stages[1]
+    assert b.advance.threshold == 0.7 and b.advance.metric == "survival" and b.advance.max_steps == 1000
+    assert (b.env, b.ppo) == (base_b.env, base_b.ppo)
+    assert changed.origins["stages.b.advance.threshold"] == str(variant.resolve())
+    assert changed.origins["stages.b.advance.window"] == str((tmp_path / "base.yaml").resolve())
+    # A run folder's copy of the variant is self-contained and reads back as the same curriculum.
+    copy = write(tmp_path, changed.file_text(), "copy.yaml")
+    assert load_curriculum(copy).stages == changed.stages
+    # Add (placed after or before a named stage), move, remove, each said explicitly.
+    more = write(tmp_path, "base: base.yaml\nstages:\n"
+                 "  c: {after: a, env: {direction: cw, period: 30}, advance: {threshold: 0.3}}\n"
+                 "  a: {after: b}\n", "more.yaml")
+    assert [s.name for s in load_curriculum(more).stages] == ["c", "b", "a"]
+    fewer = write(tmp_path, "base: base.yaml\nstages:\n  a: null\n", "fewer.yaml")
+    assert [s.name for s in load_curriculum(fewer).stages] == ["b"]
+    # A list is the whole stage order; a listed stage named like a base stage keeps its other settings.
+    listed = write(tmp_path, "base: base.yaml\nstages:\n  - {name: b, advance: {threshold: 0.6}}\n", "listed.yaml")
+    (only,) = load_curriculum(listed).stages
+    assert only.advance.threshold == 0.6 and only.advance.max_steps == 1000 and only.ppo == base_b.ppo
+    for text, message in (("  z: {advance: {threshold: 0.5}}", "stages.z: no base stage of that name; to add one"),
+                          ("  z: null", "stages.z: null removes a stage, but the base has none"),
+                          ("  c: {after: q, advance: {threshold: 0.5}}", "stages.c.after: no stage named 'q'"),
+                          ("  b: {advance: {threshold: 2}}", "stage 2 \\(b\\) advance.threshold: must be in")):
+        bad = write(tmp_path, f"base: base.yaml\nstages:\n{text}\n", "bad.yaml")
+        with pytest.raises(ConfigError, match=message):
+            load_curriculum(bad)
+
+
+def test_set_reaches_curriculum_values_and_null_turns_an_optional_setting_off(tmp_path):
+    from myo_sds.curricula.schedule import ppo_settings_at
+
+    write(tmp_path, GOOD_CURRICULUM.replace("ppo: {learning_rate: 1e-4, n_steps: 64}",
+                                            "ppo: {learning_rate: 1e-4, n_steps: 64, target_kl: 0.05}")
+          + "  - name: c\n    env: {direction: cw, period: 20}\n    ppo: {target_kl: null}\n", "cur.yaml")
+    config_file = write(tmp_path, "curriculum: cur.yaml\nppo: {target_kl: 0.1}\n", "run.yaml")
+    config = load_run_config(config_file, ("stages.b.advance.threshold=0.8", "defaults.solved_radius=0.02"))
+    assert config.curriculum.stages[1].advance.threshold == 0.8
+    assert config.curriculum.stages[0].distribution.solved_radius == 0.03  # the stage's own value wins
+    assert config.curriculum.stages[1].distribution.solved_radius == 0.02
+    assert config.curriculum.origins["stages.b.advance.threshold"] == "--set stages.b.advance.threshold=0.8"
+    assert "threshold: 0.8" in config.curriculum.file_text()
+    # target_kl: the run's 0.1, stage b's 0.05, stage c's null switches it off.
+    assert [ppo_settings_at(config, i, [0, 10, 20], 30).target_kl for i in range(3)] == [0.1, 0.05, None]
+    for assignment, message in (("stages.q.advance.threshold=0.5", "no stage named 'q'; stages: a, b, c"),
+                                ("stages.b.advance.threshold=2", "--set stages.b.advance.threshold=2: stage 2 \\(b\\) "
+                                                                 "advance.threshold: must be in \\[0, 1\\]"),
+                                ("stages.b.ppo.n_steps=null", "ppo.n_steps: expected an integer, got None"),
+                                ("stagez.b.x=1", "stagez: unknown key \\(did you mean 'stages'\\?\\)")):
+        with pytest.raises(ConfigError, match=message):
+            load_run_config(config_file, (assignment,))
+
+
+def test_a_setting_declared_once_is_read_everywhere_it_applies():
+    """A settings class and the stage overrides made from it share each field's one declaration:
+    a new field is read, checked and described in both without another line."""
+    from dataclasses import dataclass
+
+    from myo_sds.envs.declare import UNSET, describe, integer, overrides_of, parse_settings, setting
+
+    @dataclass(frozen=True)
+    class Settings:
+        n_steps: int = setting(128, parse=integer(low=1), help="rollout steps per env")
+        warm_rollouts: int = setting(0, parse=integer(low=0), help="rollouts before the first update")  # the new one
+
+    Overrides = overrides_of(Settings, ("n_steps", "warm_rollouts"), "Overrides", "a stage's changes")
+    assert parse_settings("ppo", {"warm_rollouts": 3}, Settings).warm_rollouts == 3
+    assert parse_settings("stage 2 (b) ppo", {"warm_rollouts": 2}, Overrides).as_dict() == {"warm_rollouts": 2}
+    assert Overrides().warm_rollouts is UNSET and describe(Overrides) == describe(Settings)
+    for cls, path in ((Settings, "ppo"), (Overrides, "stage 2 (b) ppo")):
+        with pytest.raises(ValueError, match=f"{re.escape(path)}.warm_rollouts: must be >= 0, got -1"):
+            parse_settings(path, {"warm_rollouts": -1}, cls)
+    # The real ones: a stage's ppo is the run config's ppo declarations, unset until written.
+    from dataclasses import fields
+
+    from myo_sds.curricula.run_settings import STAGE_PPO_SETTINGS, PpoConfig
+    from myo_sds.curricula.schema import PpoOverrides
+
+    declared = {f.name: f.metadata for f in fields(PpoConfig)}
+    assert [f.name for f in fields(PpoOverrides)] == list(STAGE_PPO_SETTINGS)
+    assert all(f.metadata["parse"] is declared[f.name]["parse"] for f in fields(PpoOverrides))
+
+
+def test_print_config_shows_every_value_and_where_it_came_from(tmp_path, capsys, monkeypatch):
+    from myo_sds.cli.train import main
+
+    write(tmp_path, GOOD_CURRICULUM.replace("defaults: {direction: hold, period: static, rsi_probability: 1.0}",
+                                            "defaults: {direction: hold, period: static, rsi_probability: 1.0, "
+                                            "preset: p1_2022}"), "base.yaml")
+    write(tmp_path, "base: base.yaml\nstages:\n  b: {advance: {threshold: 0.7}}\n", "variant.yaml")
+    write(tmp_path, "curriculum: variant.yaml\nn_envs: 2\n", "run.yaml")
+    monkeypatch.chdir(tmp_path)
+    assert main(["--config", "run.yaml", "--set", "stages.a.env.solved_radius=0.02", "--print-config"]) == 0
+    rows = {line.split()[0]: line.split()[1:] for line in capsys.readouterr().out.splitlines()[1:]}
+    assert rows["n_envs"] == ["2", "run.yaml"] and rows["seed"] == ["0", "default"]
+    assert rows["stages.b.advance.threshold"] == ["0.7", "variant.yaml"]
+    assert rows["stages.b.advance.window"] == ["5", "base.yaml"]
+    assert rows["stages.a.env.solved_radius"] == ["0.02", "--set", "stages.a.env.solved_radius=0.02"]
+    assert rows["stages.b.env.direction"] == ["ccw", "base.yaml"]
+    assert rows["stages.a.env.direction"] == ["hold", "defaults:", "base.yaml"]
+    assert rows["stages.a.env.start_angle"] == ["on_balls", "preset", "p1_2022"]
+    assert rows["stages.a.env.drop_height"] == ["1.25", "default"]
+    assert rows["stages.b.ppo.n_steps"] == ["64", "base.yaml"] and "stages.a.ppo.n_steps" not in rows
+    assert not (tmp_path / "runs").exists()  # nothing trained, no run folder

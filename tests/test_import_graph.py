@@ -76,3 +76,54 @@ def test_the_graph_sees_the_package():
 def test_no_import_cycle():
     cycle = find_cycle(import_graph())
     assert cycle is None, " -> ".join(cycle)
+
+
+# The folders a reader sees, from the bottom layer up: each imports only its own and lower layers.
+LAYERS = {"envs": {"envs"}, "curricula": {"envs", "curricula"}, "myo_sds": {"envs", "curricula", "myo_sds"}}
+
+
+def folder_of(module: str) -> str:
+    for package, folder in (("myo_sds.envs", "envs"), ("myo_sds.curricula", "curricula")):
+        if module == package or module.startswith(package + "."):
+            return folder
+    return "myo_sds"
+
+
+def test_no_folder_imports_a_folder_above_it():
+    """envs/ (the tasks) imports nothing of curricula/ or myo_sds/; curricula/ nothing of myo_sds/:
+    no folder-level circle, so each layer can be read (and tested) without the ones above it."""
+    graph = import_graph()
+    crossings = sorted(f"{source} -> {target}" for source, targets in graph.items() for target in targets
+                       if folder_of(target) not in LAYERS[folder_of(source)])
+    assert crossings == []
+
+
+def test_no_module_changes_its_search_path():
+    for name, path in modules().items():
+        assert "__path__" not in path.read_text(), f"{name} ({path}) changes a package's search path"
+
+
+def test_importing_any_module_sets_no_environment_variable():
+    """Only the entry points set the process environment; a library import leaves it alone."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    names = sorted(modules())
+    script = (
+        "import json, os\n"
+        # What the dependencies set on import themselves (gymnasium hides pygame's prompt).
+        "import gymnasium, mujoco, numpy, stable_baselines3, sb3_contrib, torch, yaml\n"
+        "before = dict(os.environ)\n"
+        f"for name in {names!r}:\n"
+        "    __import__(name)\n"
+        "print(json.dumps({k: v for k, v in os.environ.items() if before.get(k) != v}))\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("MUJOCO_GL", "OMP_", "KMP_", "MKL_", "ATEN_"))}
+    from myo_sds import process_environment
+
+    for name in process_environment():
+        env.pop(name, None)
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, cwd="/",
+                         check=True).stdout
+    assert json.loads(out.splitlines()[-1]) == {}

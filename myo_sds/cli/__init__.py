@@ -1,7 +1,4 @@
 """The command lines (``train.py``, ``evaluate.py``; installed: ``myo-sds-train``,
-``myo-sds-evaluate``). Importing them is running an entry point: the process environment is set
-here, before NumPy, torch and MuJoCo load."""
-
-from myo_sds import set_process_environment
-
-set_process_environment()
+``myo-sds-evaluate``). Each ``main`` sets the process environment first
+(:func:`myo_sds.set_process_environment`), before NumPy, torch and MuJoCo load: the modules
+import only the standard library at their top, the rest inside ``main``."""

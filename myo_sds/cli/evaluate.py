@@ -14,11 +14,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede `import mujoco`
+from myo_sds import set_process_environment
 
 
 def _noise_list(text: str) -> list[float]:
@@ -94,6 +93,7 @@ def _run_comparison(ev, refs, folder: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    set_process_environment()  # before NumPy, torch and MuJoCo load (headless rendering too)
     args = parse_args(argv)
     from myo_sds import evaluation as ev
     from myo_sds.curricula.schema import ConfigError

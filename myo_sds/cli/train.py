@@ -13,8 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from myo_sds import bundled_path
-from myo_sds.curricula.schema import ConfigError
+from myo_sds import bundled_path, set_process_environment
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -49,6 +48,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--max-hours", type=float, metavar="H",
                         help="stop after H hours of training in this call (checkpointed; --resume continues)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--print-config", action="store_true",
+                        help="with --config (and --set): print every setting the run would use and where it came "
+                             "from (file, base, --set, defaults, preset, default), then exit")
     args = parser.parse_args(argv)
     if args.export and args.to is None:
         parser.error("--export needs --to DIR")
@@ -57,6 +59,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                      "--no-progress apply")
     if args.init_from and not args.config:
         parser.error("--init-from starts a new run: use it with --config")
+    if args.print_config and not args.config:
+        parser.error("--print-config shows a config's settings: use it with --config")
     if args.config is not None and not args.config.exists():
         args.config = bundled_path("configs", str(args.config)) or args.config  # else: "file not found"
     for flag, key in (("seed", "seed"), ("n_envs", "n_envs"), ("total_steps", "total_steps")):
@@ -65,9 +69,20 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def _print(text: str) -> int:
+    try:
+        print(text, flush=True)
+    except BrokenPipeError:  # `train.py --status RUN | head`
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 0
+
+
 def show_status(run_dir: Path, json_path: Path | None) -> int:
     import json
 
+    from myo_sds.curricula.schema import ConfigError
     from myo_sds.evaluation.summary import format_summary, summarize
 
     try:
@@ -75,12 +90,7 @@ def show_status(run_dir: Path, json_path: Path | None) -> int:
     except (ConfigError, FileNotFoundError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    try:
-        print(format_summary(summary), flush=True)
-    except BrokenPipeError:  # `train.py --status RUN | head`
-        import os
-
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    _print(format_summary(summary))
     if json_path is not None:
         json_path.write_text(json.dumps(summary.to_dict(), indent=2))
     return 0
@@ -120,12 +130,13 @@ def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool)
 
 
 def main(argv: list[str] | None = None) -> int:
+    set_process_environment()  # before NumPy, torch and MuJoCo load
     args = parse_args(argv)
     if args.status:
         return show_status(args.status, args.json)
     if args.export:
         return export(args.export, args.to, args.load_checkpoint, args.resumable)
-    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.curricula.schema import ConfigError, load_run_config
     from myo_sds.run_folder import RunFolder
 
     try:
@@ -133,10 +144,14 @@ def main(argv: list[str] | None = None) -> int:
         if args.resume:
             load_run_config(RunFolder(args.resume).config_file)
         else:
-            load_run_config(args.config, tuple(args.overrides))
+            config = load_run_config(args.config, tuple(args.overrides))
     except (ConfigError, FileNotFoundError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
+    if args.print_config:
+        from myo_sds.config_report import format_config
+
+        return _print(format_config(config))
     from myo_sds.curricula.state import RunStatus
     from myo_sds.training import CurriculumTrainer
 

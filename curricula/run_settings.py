@@ -1,23 +1,26 @@
 """The run config's settings: the run's top level, the policy network, PPO, observation and
 reward normalization, and where rollouts run (locally or on Ray). Each field is declared once
-with :func:`~myo_sds.declare.setting` (default, parser, meaning); ``curricula.schema`` reads a
+with :func:`~myo_sds.envs.declare.setting` (default, parser, meaning); ``curricula.schema`` reads a
 run config through them.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass
 from pathlib import Path
 from typing import Any
 
-from myo_sds.declare import boolean, check_keys, integer, number, one_of, optional, setting, text
+from myo_sds.envs.declare import boolean, integer, number, one_of, optional, parse_settings, setting, text
 
 ACTIVATIONS = ("relu", "tanh", "elu", "leaky_relu")
 VEC_ENVS = ("thread", "dummy", "subproc")
 DEVICES = ("cpu", "cuda", "auto")
 ROLLOUT_BACKENDS = ("local", "ray")
 EXPLORATIONS = ("gaussian", "lattice")
+
+
+_positive_rate = number(low=0, strict_low=True)
 
 
 @dataclass(frozen=True)
@@ -29,9 +32,9 @@ class LearningRateDecay:
     YAML: ``learning_rate: {start: 3.0e-3, end: 1.0e-4, steps: 1500000}``.
     """
 
-    start: float
-    end: float
-    steps: int
+    start: float = setting(MISSING, parse=_positive_rate, help="the rate at the clock's start")
+    end: float = setting(MISSING, parse=_positive_rate, help="the rate from `steps` on")
+    steps: int = setting(MISSING, parse=integer(low=1), help="env steps from start to end")
 
     def at(self, elapsed_steps: int) -> float:
         """The learning rate ``elapsed_steps`` env steps after the clock started."""
@@ -45,15 +48,8 @@ LearningRate = float | LearningRateDecay
 def learning_rate(name: str, value: Any) -> LearningRate:
     """A rate (> 0) or ``{start, end, steps}``: a log-linear decay over env steps."""
     if not isinstance(value, Mapping):
-        return number(low=0, strict_low=True)(name, value)
-    names = tuple(f.name for f in fields(LearningRateDecay))
-    check_keys(name, value, names)
-    missing = [key for key in names if key not in value]
-    if missing:
-        raise ValueError(f"{name}: a learning-rate decay needs {', '.join(names)}; missing: {', '.join(missing)}")
-    rate = number(low=0, strict_low=True)
-    return LearningRateDecay(start=rate(f"{name}.start", value["start"]), end=rate(f"{name}.end", value["end"]),
-                             steps=integer(low=1)(f"{name}.steps", value["steps"]))
+        return _positive_rate(name, value)
+    return parse_settings(name, value, LearningRateDecay)
 
 
 def layers(name: str, value: Any) -> tuple[int, ...]:
@@ -118,24 +114,21 @@ class PpoWarmup:
     YAML, under ``ppo``: ``warmup: {steps: 150000, n_steps: 16, batch_size: 128, n_epochs: 10}``.
     """
 
-    steps: int = 0
-    n_steps: int | None = None
-    batch_size: int | None = None
-    n_epochs: int | None = None
+    steps: int = setting(0, parse=integer(low=0), help="how many env steps from the run's start it lasts")
+    n_steps: int | None = setting(None, parse=optional(integer(low=1)), help="rollout steps per env meanwhile")
+    batch_size: int | None = setting(None, parse=optional(integer(low=1)), help="samples per minibatch meanwhile")
+    n_epochs: int | None = setting(None, parse=optional(integer(low=1)), help="passes over each rollout meanwhile")
 
     def active(self, step: int) -> bool:
         return step < self.steps
 
 
 def ppo_warmup(name: str, value: Any) -> PpoWarmup:
-    names = tuple(f.name for f in fields(PpoWarmup))
     if value is None or value == {}:
         return PpoWarmup()
-    check_keys(name, value, names)
-    if "steps" not in value:
+    if isinstance(value, Mapping) and "steps" not in value:
         raise ValueError(f"{name}: a warm-up needs steps: how many env steps from the run's start it lasts")
-    return PpoWarmup(**{key: integer(low=0 if key == "steps" else 1)(f"{name}.{key}", v)
-                        for key, v in value.items() if v is not None})
+    return parse_settings(name, value, PpoWarmup)
 
 
 @dataclass(frozen=True)
@@ -157,6 +150,10 @@ class PpoConfig:
         help="SB3's early stop: an update ends its epochs at the first minibatch whose approximate KL from the "
              "rollout's policy exceeds 1.5 x this; null: all n_epochs always run")
     warmup: PpoWarmup = setting(PpoWarmup(), parse=ppo_warmup, help="{steps, n_steps, batch_size, n_epochs}")
+
+
+# The PPO settings a curriculum stage may change (from its start until a later stage changes them).
+STAGE_PPO_SETTINGS = ("learning_rate", "n_steps", "batch_size", "n_epochs", "clip_range", "ent_coef", "target_kl")
 
 
 @dataclass(frozen=True)

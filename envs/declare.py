@@ -1,7 +1,7 @@
 """Declaring a setting once: its default, how a written value is read, and what it means.
 
 Every configurable value of the pipeline, an env knob (``envs/knobs.py``) as much as a PPO or
-Ray setting (``myo_sds/run_settings.py``), a stage's rule (``curricula/schema.py``) or the run
+Ray setting (``curricula/run_settings.py``), a stage's rule (``curricula/schema.py``) or the run
 config's top level, is a field of a frozen dataclass declared with :func:`setting`. A parser is
 ``parse(name, value) -> typed value`` and raises ``ValueError("name: what is wrong")``; reading
 a YAML mapping (:func:`read_settings`) turns that into a ``ConfigError`` naming the file and
@@ -24,29 +24,77 @@ def setting(default: Any = MISSING, *, parse: Parser, help: str, default_factory
     return field(default=default, default_factory=default_factory, metadata={"parse": parse, "help": help})
 
 
+class _Unset:
+    """The value of an override that was not written (``None`` is a written ``null``)."""
+
+    def __repr__(self) -> str:
+        return "UNSET"
+
+    def __reduce__(self):
+        return "UNSET"
+
+
+UNSET = _Unset()
+
+
+def overrides_of(cls: type, names: tuple[str, ...], name: str, doc: str) -> type:
+    """A frozen dataclass of some of ``cls``'s settings, each declared as there (parser, meaning)
+    but unset by default: what a later scope (a curriculum stage) changes of an earlier one's.
+    ``as_dict()`` gives the written ones; a written ``null`` is kept (an optional setting off)."""
+    from dataclasses import make_dataclass
+
+    declared = {f.name: f for f in fields(cls)}
+    unknown = [n for n in names if n not in declared]
+    if unknown:
+        raise TypeError(f"{cls.__name__} declares no {', '.join(unknown)}")
+    spec = [(n, Any, setting(UNSET, parse=declared[n].metadata["parse"], help=declared[n].metadata["help"]))
+            for n in names]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not UNSET}
+
+    made = make_dataclass(name, spec, frozen=True, namespace={"as_dict": as_dict, "__doc__": doc})
+    made.__module__ = cls.__module__
+    return made
+
+
 def describe(cls: type) -> dict[str, str]:
     """Each setting's name and meaning, in declaration order."""
     return {f.name: f.metadata["help"] for f in fields(cls)}
 
 
-def read_settings(reader, key: str, raw: Any, cls: type) -> Any:
-    """A settings dataclass from a YAML mapping (``None``: all defaults): unknown keys and bad
-    values raise the reader's ``ConfigError``, naming the file (or ``--set``) and key path."""
+def parse_settings(name: str, raw: Any, cls: type) -> Any:
+    """A settings dataclass from a written mapping (``None``: all defaults), each value read by
+    its field's parser; unknown keys, bad values and missing required ones raise ``ValueError``
+    naming the key path (``name.key``). A class may check its fields together in ``__post_init__``
+    (raising ``ValueError("key: what is wrong")``)."""
     declared = {f.name: f for f in fields(cls)}
-    raw = reader.mapping(key, raw, tuple(declared))
-    values = {}
-    for name, value in raw.items():
-        path = f"{key}.{name}" if key else name
-        try:
-            values[name] = declared[name].metadata["parse"](path, value)
-        except ValueError as error:
-            raise reader.error(*split_message(path, str(error))) from None
+    raw = {} if raw is None else raw
+    check_keys(name, raw, tuple(declared))
+    path = (lambda key: f"{name}.{key}") if name else (lambda key: key)
+    values = {key: declared[key].metadata["parse"](path(key), value) for key, value in raw.items()}
     missing = [f.name for f in declared.values()
                if f.default is MISSING and f.default_factory is MISSING and f.name not in values]
     if missing:
-        path = f"{key}.{missing[0]}" if key else missing[0]
-        raise reader.error(path, f"missing: {declared[missing[0]].metadata['help']}")
-    return cls(**values)
+        raise ValueError(f"{path(missing[0])}: missing: {declared[missing[0]].metadata['help']}")
+    try:
+        return cls(**values)
+    except ValueError as error:
+        raise ValueError(path(str(error))) from None
+
+
+def nested(cls: type) -> Parser:
+    """A parser of a mapping read into the settings dataclass ``cls`` (:func:`parse_settings`)."""
+    return lambda name, value: parse_settings(name, value, cls)
+
+
+def read_settings(reader, key: str, raw: Any, cls: type) -> Any:
+    """A settings dataclass from a YAML mapping (``None``: all defaults): unknown keys and bad
+    values raise the reader's ``ConfigError``, naming the file (or ``--set``) and key path."""
+    try:
+        return parse_settings(key, raw, cls)
+    except ValueError as error:
+        raise reader.error(*split_message(key, str(error))) from None
 
 
 def split_message(path: str, message: str) -> tuple[str, str]:
@@ -69,7 +117,7 @@ def check_keys(name: str, written: Any, allowed: tuple[str, ...]) -> None:
         if key not in allowed:
             near = difflib.get_close_matches(str(key), allowed, n=1)
             hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise ValueError(f"{name}.{key}: unknown key{hint}; allowed: {', '.join(allowed)}")
+            raise ValueError(f"{name + '.' if name else ''}{key}: unknown key{hint}; allowed: {', '.join(allowed)}")
 
 
 # -- parsers -----------------------------------------------------------------------------

@@ -1,0 +1,106 @@
+"""``train.py --config X --print-config``: every value a run would use, and where it came from
+(the file that wrote it, a ``base:`` it inherits, a ``--set``, the stage's ``defaults``, its
+preset, or the declared default)."""
+
+from __future__ import annotations
+
+from dataclasses import fields, is_dataclass
+from typing import Any
+
+from myo_sds.curricula.schema import RunConfig
+from myo_sds.envs.declare import UNSET
+from myo_sds.envs.task_specs import TASK_SPECS
+
+
+def _text(value: Any) -> str:
+    """A value as a person would write it in the YAML."""
+    if value is None:
+        return "null"
+    if hasattr(value, "low") and hasattr(value, "high"):  # an env knob's range
+        return f"{value.low:g}" if value.low == value.high else f"[{value.low:g}, {value.high:g}]"
+    if is_dataclass(value) and not isinstance(value, type):
+        return "{" + ", ".join(f"{f.name}: {_text(getattr(value, f.name))}" for f in fields(value)) + "}"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {_text(v)}" for k, v in value.items()) + "}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_text(v) for v in value) + "]"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def _rows(prefix: str, settings: Any, origins: dict[str, str], fallback: str = "default") -> list[tuple[str, str, str]]:
+    rows = []
+    for f in fields(settings):
+        value = getattr(settings, f.name)
+        key = f"{prefix}{f.name}"
+        if value is UNSET:
+            continue
+        origin = origins.get(key) or next((o for k, o in origins.items() if k.startswith(key + ".")), fallback)
+        rows.append((key, _text(value), origin))
+    return rows
+
+
+def config_rows(config: RunConfig) -> list[tuple[str, str, str]]:
+    """(key, value, origin) of every setting of the run and of each stage of its curriculum."""
+    origins = dict(config.origins)
+    rows = [("curriculum", str(config.curriculum_path), origins.get("curriculum", "default"))]
+    for f in fields(config):
+        if f.name in ("curriculum", "curriculum_path", "source", "origins"):
+            continue
+        value = getattr(config, f.name)
+        if is_dataclass(value):
+            rows += _rows(f"{f.name}.", value, origins)
+        else:
+            rows.append((f.name, _text(value), origins.get(f.name, "default")))
+    curriculum = config.curriculum
+    c_origins = dict(curriculum.origins)
+    knobs_class = TASK_SPECS[curriculum.task].knobs
+    if curriculum.probe is not None:
+        rows += _rows("probe.", curriculum.probe, c_origins)
+    for stage in curriculum.stages:
+        prefix = f"stages.{stage.name}."
+        preset = stage.env.get("preset", "p1")
+        for f in fields(stage.distribution):
+            own, shared = f"{prefix}env.{f.name}", f"defaults.{f.name}"
+            if own in c_origins or any(k.startswith(own + ".") for k in c_origins):
+                origin = c_origins.get(own) or next(o for k, o in c_origins.items() if k.startswith(own + "."))
+            elif shared in c_origins or any(k.startswith(shared + ".") for k in c_origins):
+                origin = "defaults: " + (c_origins.get(shared)
+                                         or next(o for k, o in c_origins.items() if k.startswith(shared + ".")))
+            elif f.name in knobs_class.PRESETS.get(preset, {}):
+                origin = f"preset {preset}"
+            else:
+                origin = "default"
+            rows.append((f"{prefix}env.{f.name}", _text(getattr(stage.distribution, f.name)), origin))
+        for part in ("advance", "evaluate"):
+            settings = getattr(stage, part)
+            if settings is None:
+                rows.append((f"{prefix}{part}", "null", "not set"))
+            else:
+                rows += _rows(f"{prefix}{part}.", settings, c_origins)
+        rows += _rows(f"{prefix}ppo.", stage.ppo, c_origins)
+    return rows
+
+
+def _short(origin: str) -> str:
+    """A file under the working folder by its relative path."""
+    from pathlib import Path
+
+    prefix = "defaults: " if origin.startswith("defaults: ") else ""
+    path = Path(origin[len(prefix):])
+    if path.is_absolute():
+        try:
+            return prefix + str(path.relative_to(Path.cwd()))
+        except ValueError:
+            pass
+    return origin
+
+
+def format_config(config: RunConfig) -> str:
+    rows = [(key, value, _short(origin)) for key, value, origin in config_rows(config)]
+    key_width = min(max(len(k) for k, _, _ in rows), 48)
+    value_width = min(max(len(v) for _, v, _ in rows), 40)
+    lines = [f"{key:<{key_width}}  {value:<{value_width}}  {origin}" for key, value, origin in rows]
+    return "\n".join(["# every setting of the run: key, value, where it came from "
+                      "(unset stage ppo settings keep the run's)", *lines])
