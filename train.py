@@ -6,7 +6,9 @@
 
 import sys
 
-from myo_sds.cli.train import main
-
 if __name__ == "__main__":
+    try:
+        from myo_sds.cli.train import main
+    except KeyboardInterrupt:  # Ctrl-C while Python starts: nothing began
+        sys.exit(130)
     sys.exit(main())

@@ -27,6 +27,7 @@ class RunStatus(str, enum.Enum):
     BUDGET_REACHED = "budget_reached"  # total_steps spent
     COMPLETED = "completed"  # the last stage passed
     STOPPED = "stopped"  # a stage ran out of steps with on_max_steps: stop
+    DIVERGED = "diverged"  # an update made the policy non-finite; the run kept the policy from before it
 
 
 @dataclass(frozen=True)

@@ -289,7 +289,9 @@ class RunFolder:
     @classmethod
     def require(cls, path: Path) -> RunFolder:
         """The run (or model) folder ``path`` names, else ``FileNotFoundError`` saying why."""
-        folder = cls.containing(path) if Path(path).exists() else None
+        if not Path(path).exists():
+            raise FileNotFoundError(f"{path}: no such file or folder")
+        folder = cls.containing(path)
         if folder is None:
             raise FileNotFoundError(f"{path}: not a run folder (no {CONFIG_FILE} with {CHECKPOINT_DIR}/ or "
                                     f"{FINAL_MODEL} inside)")

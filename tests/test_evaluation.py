@@ -416,3 +416,29 @@ def test_runs_compared_by_env_steps_and_hours_in_one_figure(run_dir, tmp_path):
     assert _run_comparison(ev, refs, tmp_path / "plots").endswith("(2 runs by env steps and by hours)")
     assert (tmp_path / "plots" / "learning_curves_compared.png").is_file()
     assert "needs two or more run folders" in _run_comparison(ev, refs[:1], tmp_path / "plots")
+
+
+def test_learning_curves_of_runs_with_the_same_folder_name_do_not_overwrite_each_other(tmp_path):
+    from types import SimpleNamespace
+
+    from myo_sds.cli.evaluate import _curve_names
+
+    a, b = tmp_path / "a" / "run", tmp_path / "b" / "run"
+    refs = [SimpleNamespace(run_dir=a), SimpleNamespace(run_dir=b), SimpleNamespace(run_dir=a / "checkpoints" / ".."),
+            SimpleNamespace(run_dir=None)]
+    a.mkdir(parents=True), b.mkdir(parents=True)
+    # One curve per run (a run's checkpoints share it), each under its own name.
+    assert _curve_names(refs) == {a.resolve(): "run", b.resolve(): "run-2"}
+
+
+@pytest.mark.slow  # renders frames in software
+def test_the_video_names_the_policy_and_the_task_it_shows(run_dir, tmp_path, monkeypatch):
+    from myo_sds.evaluation import video
+
+    shown: list[list[str]] = []
+    real = video._overlay
+    monkeypatch.setattr(video, "_overlay", lambda frame, lines: shown.append(lines) or real(frame, lines))
+    ref = ev.resolve_checkpoint(run_dir)
+    choice = ev.choose_env(ref, "p1", start_noise=0.02)
+    video.record_video(ref, choice, tmp_path / "v.mp4", [(0, "best of 1")])
+    assert shown and all(lines[0] == f"{run_dir.name}/final_model.zip on ours:p1 noise 0.02" for lines in shown)

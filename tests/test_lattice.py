@@ -4,12 +4,15 @@ log-probabilities, its samples, and a Lattice policy that trains, resumes and ev
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch as th
 
 from myo_sds.lattice import LatticeNoise
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def small_distribution(full_std: bool = False, alpha: float = 1.0, std_reg: float = 0.0) -> LatticeNoise:
@@ -171,3 +174,25 @@ def test_log_probability_entropy_and_their_gradients_equal_torch_s_multivariate_
     x = th.randn(3, 5, 5, dtype=th.float64)
     sigma = (x @ x.transpose(1, 2) + th.eye(5, dtype=th.float64)).requires_grad_()
     assert th.autograd.gradcheck(lambda s: _InverseAndHalfLogDet.apply(0.5 * (s + s.transpose(1, 2))), (sigma,))
+
+
+def test_an_update_that_makes_the_policy_non_finite_stops_the_run_with_the_policy_from_before(tmp_path):
+    """Lattice on the quickstart config: the first update overflows a probability ratio (its noise
+    is small at log_std_init -1). The run stops with a clear reason and a finite, resumable-looking
+    checkpoint instead of a Cholesky traceback; the noise floor the message names trains through."""
+    from myo_sds.curricula.state import RunStatus
+    from myo_sds.run_folder import RunFolder
+    from myo_sds.training import CurriculumTrainer
+
+    config = REPO / "configs" / "quickstart.yaml"
+    trainer = CurriculumTrainer.start(config, ("policy.exploration=lattice", "total_steps=3072"),
+                                      run_dir=tmp_path / "bad", progress=False)
+    state = trainer.run()
+    trainer.close()
+    assert state.status is RunStatus.DIVERGED and state.num_timesteps == 1024
+    assert all(bool(p.isfinite().all()) for p in trainer.model.policy.parameters())
+    assert RunFolder(tmp_path / "bad").latest_checkpoint().steps == 1024
+    trainer = CurriculumTrainer.start(config, ("policy.exploration=lattice", "policy.lattice_std_reg=0.1",
+                                               "total_steps=3072"), run_dir=tmp_path / "floor", progress=False)
+    assert trainer.run().status is RunStatus.BUDGET_REACHED
+    trainer.close()

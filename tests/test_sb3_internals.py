@@ -91,19 +91,24 @@ def test_no_private_sb3_member_is_used_outside_the_fence():
     private, declared = sb3_private_names(), sb3_internals.declared_private_names()
     assert {"_last_obs", "_n_updates", "_setup_learn"} <= private  # the scan sees SB3's own
     undeclared = []
-    for folder in ("myo_sds", "envs", "curricula"):
-        for path in sorted((REPO / folder).rglob("*.py")):
-            if path.name == "sb3_internals.py":
+    # Every Python folder of the repository but the tests (which may poke at anything) and the
+    # virtual environments.
+    folders = sorted(p for p in REPO.iterdir() if p.is_dir() and not p.name.startswith(".")
+                     and p.name not in ("tests", "models") and any(p.rglob("*.py")))
+    assert {"myo_sds", "envs", "curricula", "benchmarks", "experiments"} <= {p.name for p in folders}
+    files = [path for folder in folders for path in sorted(folder.rglob("*.py"))] + sorted(REPO.glob("*.py"))
+    for path in files:
+        if path.name == "sb3_internals.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Attribute):
+                name = node.attr
+            elif isinstance(node, ast.FunctionDef):
+                name = node.name
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                name = node.value
+            else:
                 continue
-            for node in ast.walk(ast.parse(path.read_text())):
-                if isinstance(node, ast.Attribute):
-                    name = node.attr
-                elif isinstance(node, ast.FunctionDef):
-                    name = node.name
-                elif isinstance(node, ast.Constant) and isinstance(node.value, str):
-                    name = node.value
-                else:
-                    continue
-                if name in private and name not in declared:
-                    undeclared.append(f"{path.relative_to(REPO)}:{node.lineno}: {name}")
+            if name in private and name not in declared:
+                undeclared.append(f"{path.relative_to(REPO)}:{node.lineno}: {name}")
     assert not undeclared, "private SB3 members not declared in myo_sds/sb3_internals.py:\n" + "\n".join(undeclared)

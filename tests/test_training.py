@@ -493,3 +493,27 @@ def test_an_evaluation_metric_needs_the_stage_evaluation_and_a_probe_a_known_env
         with pytest.raises(ConfigError, match=message):
             CurriculumTrainer.start(write_config(tmp_path, total=256, curriculum=CURRICULUM.replace(old, new)),
                                     run_dir=tmp_path / "bad", overwrite=True, progress=False)
+
+
+@pytest.mark.slow  # real processes and signals
+def test_ctrl_c_at_any_moment_leaves_a_resumable_run_or_none(tmp_path):
+    """From the first import to the first updates: no traceback, and the run folder is either
+    gone or holds a checkpoint that --resume accepts."""
+    config = write_config(tmp_path, total=100_000)
+    outcomes = []
+    for delay in (0.2, 1.0, 2.0, 3.0, 4.5, 7.0):
+        run = tmp_path / f"run-{delay}"
+        process = run_train(["--config", str(config), "--run-dir", str(run), "--no-progress"], tmp_path)
+        time.sleep(delay)
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=120)
+        assert "Traceback" not in output, output
+        assert process.returncode in (130, 2) or (process.returncode == 1 and delay < 1), output
+        if run.exists():
+            folder = RunFolder(run)
+            assert folder.latest_checkpoint() is not None, (delay, output, sorted(p.name for p in run.iterdir()))
+            CurriculumTrainer.resume(run, progress=False).close()
+            outcomes.append("resumable")
+        else:
+            outcomes.append("none")
+    assert "resumable" in outcomes  # the later signals came after training began

@@ -59,15 +59,26 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def _learning_curve(ev, ref, folder: Path) -> str:
+def _curve_names(refs) -> dict[Path, str]:
+    """One learning-curve file name per run (a run's checkpoints share its curve); runs whose
+    folders have the same name are told apart by a number, so no file is written over another."""
+    runs = list(dict.fromkeys(ref.run_dir.resolve() for ref in refs if ref.run_dir is not None))
+    names: dict[Path, str] = {}
+    for run in runs:
+        name, n = run.name, 2
+        while name in names.values():
+            name, n = f"{run.name}-{n}", n + 1
+        names[run] = name
+    return names
+
+
+def _learning_curve(ev, ref, folder: Path, name: str) -> str:
     """Draw (or, for a model folder without an episode log, copy the shipped) learning curve of
     ``ref``'s run into ``folder``; what was done, or why there is none, as one line. Never raises
     for a missing curve: the other outputs are still written."""
     import shutil
 
-    if ref.run_dir is None:
-        return f"no learning curve for {ref.label}: it is not inside a run or model folder"
-    path = folder / f"learning_curve_{ref.run_dir.name}.png"
+    path = folder / f"learning_curve_{name}.png"
     try:
         ev.plot_learning_curve(ref.run_dir, path)
     except ev.EvaluationError as error:
@@ -129,8 +140,13 @@ def main(argv: list[str] | None = None) -> int:
         if args.plots:
             ev.plot_score_histogram(reports, args.plots / "score_histogram.png")
             print(f"wrote {args.plots / 'score_histogram.png'}")
+            names = _curve_names(refs)
             for ref in refs:
-                print(_learning_curve(ev, ref, args.plots))
+                if ref.run_dir is None:
+                    print(f"no learning curve for {ref.label}: it is not inside a run or model folder")
+            for run, name in names.items():
+                ref = next(r for r in refs if r.run_dir is not None and r.run_dir.resolve() == run)
+                print(_learning_curve(ev, ref, args.plots, name))
             print(_run_comparison(ev, refs, args.plots))
         if args.video:
             # Episodes with start noise differ from each other; without it a fixed start repeats one.
@@ -141,6 +157,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ev.EvaluationError, ConfigError, RuntimeError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("\ninterrupted: nothing written after the last 'wrote' line", file=sys.stderr)
+        return 130
     return 0
 
 

@@ -129,9 +129,31 @@ def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool)
     return 0
 
 
+def _left_behind(trainer, args) -> str:
+    """What an interrupted start or resume leaves: a new run without a checkpoint is removed."""
+    if args.resume:
+        return f"the run is as its last checkpoint left it; continue with `python train.py --resume {args.resume}`"
+    if trainer is None:
+        return "before the first step; no run folder was kept"
+    if trainer.folder.latest_checkpoint() is None:
+        trainer.folder.remove()
+        return "before the first checkpoint; no run folder was kept"
+    return f"continue with `python train.py --resume {trainer.run_dir}`"
+
+
 def main(argv: list[str] | None = None) -> int:
     set_process_environment()  # before NumPy, torch and MuJoCo load
     args = parse_args(argv)
+    started: list = []  # the trainer, once made
+    try:
+        return _main(args, started)
+    except KeyboardInterrupt:
+        # Before the run's own handler was in place (or a second Ctrl-C): say what is left.
+        print(f"\ninterrupted: {_left_behind(started[0] if started else None, args)}", file=sys.stderr)
+        return 130
+
+
+def _main(args: argparse.Namespace, started: list) -> int:
     if args.status:
         return show_status(args.status, args.json)
     if args.export:
@@ -142,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         # Check the config before torch and MuJoCo load, so a typo is reported at once.
         if args.resume:
-            load_run_config(RunFolder(args.resume).config_file)
+            load_run_config(RunFolder.require(args.resume).config_file)
         else:
             config = load_run_config(args.config, tuple(args.overrides))
     except (ConfigError, FileNotFoundError) as error:
@@ -166,14 +188,18 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, FileNotFoundError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    print(f"run folder: {trainer.run_dir}  (seed {trainer.config.seed})")
+    started.append(trainer)
     try:
+        print(f"run folder: {trainer.run_dir}  (seed {trainer.config.seed})")
         state = trainer.run(max_wall_s=args.max_hours * 3600 if args.max_hours is not None else None)
+    except Exception:
+        print(f"error: training failed; {_left_behind(trainer, args)}", file=sys.stderr)
+        raise
     finally:
         trainer.close()
     print(f"{state.status.value} at step {state.num_timesteps}, stage {state.stage_index + 1}/"
           f"{len(trainer.config.curriculum.stages)} ({trainer.stage.name}); run folder: {trainer.run_dir}")
-    return 130 if state.status is RunStatus.INTERRUPTED else 0
+    return {RunStatus.INTERRUPTED: 130, RunStatus.DIVERGED: 1}.get(state.status, 0)
 
 
 if __name__ == "__main__":

@@ -52,13 +52,14 @@ def _overlay(frame: np.ndarray, lines: list[str]) -> np.ndarray:
 
 def record_video(ref: CheckpointRef, choice: EnvChoice, path: Path, episodes: list[tuple[int, str]]) -> int:
     """Render the given ``(seed, caption)`` episodes of our env to an MP4 at real time, with an
-    overlay (caption, step, solved, score so far); each episode's last frame is held for
+    overlay (the policy and task, caption, step, solved, score so far); each episode's last frame is held for
     :data:`HOLD_LAST_FRAME_S` with its result. Returns the frame count."""
     import imageio
 
     policy = load_policy(ref, choice.task)
     env = make_env(EnvChoice(choice.task, choice.name, choice.distribution, official=False), render=True)
     frames: list[np.ndarray] = []
+    who = f"{ref.label} on {choice.label}"  # which policy, on which task
     for number, (seed, caption) in enumerate(episodes, start=1):
         steps: list[tuple[np.ndarray, bool]] = []
         result = run_episode(policy, env, choice, seed, steps)
@@ -66,11 +67,11 @@ def record_video(ref: CheckpointRef, choice: EnvChoice, path: Path, episodes: li
         title = f"episode {number}/{len(episodes)}: {caption} (seed {seed})"
         for step, (image, solved_now) in enumerate(steps, start=1):
             solved += solved_now
-            frames.append(_overlay(image, [title, f"step {step}/{result.horizon}",
+            frames.append(_overlay(image, [who, title, f"step {step}/{result.horizon}",
                                            f"solved: {'yes' if solved_now else 'no'}",
                                            f"score so far {solved / result.horizon:.3f}"]))
         ending = f"balls dropped at step {result.length}" if result.dropped else "episode complete"
-        last = _overlay(steps[-1][0], [title, ending, f"score {result.score:.3f}"])
+        last = _overlay(steps[-1][0], [who, title, ending, f"score {result.score:.3f}"])
         frames += [last] * int(HOLD_LAST_FRAME_S * VIDEO_FPS)
     env.close()
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -135,9 +135,19 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
     """Fine-tuning: give a new ``model`` the weights and optimizer state of a trained policy,
     and its VecNormalize the policy's normalization moments (this run's normalization
     settings stay)."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
     from myo_sds.curricula.schema import ConfigError
     from myo_sds.published import load_statistics
 
+    data, _, _ = load_from_zip_file(str(model_file), load_data=True, device="cpu",
+                                    custom_objects={"lr_schedule": None, "clip_range": None})
+    for space in ("observation_space", "action_space"):
+        trained, ours = data.get(space), getattr(model, space)
+        if trained is not None and trained.shape != ours.shape:
+            raise ConfigError(f"--init-from {model_file}: it was trained on {space.split('_')[0]}s of "
+                              f"{trained.shape[0]} values, this config's task has {ours.shape[0]} (a policy of "
+                              "another task cannot start this one)")
     try:
         if _gaussian_into_lattice(model, model_file):
             _load_mean_network(model, model_file)

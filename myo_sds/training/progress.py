@@ -1,8 +1,9 @@
 """The console's view of a curriculum run: one progress bar per stage.
 
 A run's step budget (often 100M env steps) says nothing about when a stage will pass, so the
-bar counts the current stage's env steps toward its ``max_steps`` (or toward the run's budget
-when it has none), and its text says how far the measured value is from the threshold.
+bar counts the current stage's env steps toward its ``max_steps``, or toward the run's budget
+when that ends first (so its time estimate is the stage's or the run's end, whichever comes
+first), and its text says how far the measured value is from the threshold.
 """
 
 from __future__ import annotations
@@ -27,12 +28,18 @@ class StageProgressBar:
 
         self.close()
         rule = stage.advance
-        limit = rule.max_steps if rule is not None and rule.max_steps is not None else budget - run_steps + stage_steps
+        # The bar ends where the stage will: at its max_steps, or where the run's budget ends first.
+        limit = budget - run_steps + stage_steps
+        if rule is not None and rule.max_steps is not None:
+            limit = min(limit, rule.max_steps)
         over = (f"over {rule.window} episodes" if rule is None or rule.window_metric == rule.metric
                 else "in a stage evaluation")
+        ends = "" if rule is None or rule.max_steps is None or limit == rule.max_steps else \
+            f" (the run's budget ends at {limit:,})"
         self.write(f"{stage_label(index, stage.name)} of {self.n_stages}"
                    + (f": until {rule.metric} >= {rule.threshold:g} {over}, at most "
-                      f"{limit:,} env steps" if rule is not None else ": until the step budget is spent"))
+                      f"{rule.max_steps or limit:,} env steps{ends}" if rule is not None
+                      else ": until the step budget is spent"))
         self.bar = tqdm(total=limit, initial=stage_steps, unit="step", unit_scale=True, dynamic_ncols=True,
                         desc=f"stage {index + 1}/{self.n_stages}", disable=not self.enabled, smoothing=0.1,
                         mininterval=0.5 if sys.stderr.isatty() else 30.0)

@@ -60,6 +60,28 @@ class RolloutTiming:
     update_s: float
 
 
+class UpdateDiverged(RuntimeError):
+    """A PPO update left non-finite parameters (the model is restored to before it)."""
+
+
+def _finite(model) -> bool:
+    return all(bool(p.isfinite().all()) for p in model.policy.parameters())
+
+
+def _training_state(model) -> tuple[dict, dict]:
+    """Copies of the policy's weights and the optimizer's state, to undo an update."""
+    import copy
+
+    return ({k: v.detach().clone() for k, v in model.policy.state_dict().items()},
+            copy.deepcopy(model.policy.optimizer.state_dict()))
+
+
+def _restore_training_state(model, saved: tuple[dict, dict]) -> None:
+    weights, optimizer = saved
+    model.policy.load_state_dict(weights)
+    model.policy.optimizer.load_state_dict(optimizer)
+
+
 def _log_rest_starts(logger, episodes) -> None:
     """The rest-start signal: of a rollout's episodes that began with the balls where the hand
     holds them (not placed on their targets), how many and their mean solved steps, by direction.
@@ -140,23 +162,25 @@ class CurriculumTrainer:
             folder = RunFolder.create(config.output_dir, config_path.stem, config.seed)
         else:
             folder = RunFolder.claim(Path(run_dir), overwrite)
-        # The run folder is self-contained: its config points at its own copy of the curriculum.
-        resolved = {**config.source, "curriculum": folder.curriculum_file.name, "seed": config.seed}
-        folder.write_provenance(yaml.safe_dump(resolved, sort_keys=False), config.curriculum.file_text())
-        set_random_seed(config.seed)
-        state = CurriculumState()
-        stage, settings = config.curriculum.stages[0], ppo_settings_at(config, 0, state.stage_starts(), 0)
-        venv = build_training_venv(config, stage)
-        model = build_model(config, venv, settings)
-        if trained is not None:
-            try:
+        venv = None
+        try:
+            # The run folder is self-contained: its config points at its own copy of the curriculum.
+            resolved = {**config.source, "curriculum": folder.curriculum_file.name, "seed": config.seed}
+            folder.write_provenance(yaml.safe_dump(resolved, sort_keys=False), config.curriculum.file_text())
+            set_random_seed(config.seed)
+            state = CurriculumState()
+            stage, settings = config.curriculum.stages[0], ppo_settings_at(config, 0, state.stage_starts(), 0)
+            venv = build_training_venv(config, stage)
+            model = build_model(config, venv, settings)
+            if trained is not None:
                 initialize_from(model, venv, *trained)
-            except ConfigError:
+            model.set_logger(configure(str(folder.tensorboard_dir), ["tensorboard"]))
+            return cls(config, folder, state, model, _rollouts(config, model, stage, settings), progress)
+        except BaseException:  # an error or Ctrl-C before the first step: no half-made run folder stays
+            if venv is not None:
                 venv.close()
-                folder.remove()  # nothing trained yet: no half-made run folder stays
-                raise
-        model.set_logger(configure(str(folder.tensorboard_dir), ["tensorboard"]))
-        return cls(config, folder, state, model, _rollouts(config, model, stage, settings), progress)
+            folder.remove()
+            raise
 
     @classmethod
     def resume(cls, run_dir: str | Path, progress: bool = True,
@@ -245,6 +269,10 @@ class CurriculumTrainer:
                 self.apply_ppo_settings()  # a decaying rate or a warm-up's end acts between rollouts
                 try:
                     self._iterate()
+                except UpdateDiverged as error:
+                    state.status = RunStatus.DIVERGED
+                    self.progress_bar.write(f"error: {error}")
+                    break
                 except WorkerLost as error:
                     state.status = RunStatus.INTERRUPTED
                     self.progress_bar.write(f"{error}; saving a checkpoint; continue with "
@@ -280,10 +308,22 @@ class CurriculumTrainer:
         updated_at = time.perf_counter()
         if complete:
             epochs_before = updates_done(model)
+            before = _training_state(model)
             try:
                 model.train()
             except UpdateInterrupted:
                 pass  # stopped between minibatches: weights and optimizer are consistent
+            except RuntimeError:  # e.g. Lattice's Cholesky factor of a covariance made of NaNs
+                if _finite(model):
+                    raise
+            if not _finite(model):
+                _restore_training_state(model, before)
+                raise UpdateDiverged(
+                    f"the PPO update at env step {model.num_timesteps:,} made the policy's parameters non-finite "
+                    "(a probability ratio overflowed); the run stops with the policy from before it. "
+                    + ("With exploration: lattice, give the action noise a floor (policy.lattice_std_reg: 0.1) "
+                       "or lower ppo.learning_rate" if self.config.policy.exploration == "lattice"
+                       else "Lower ppo.learning_rate or clip_range"))
             # SB3 counts an update's epochs, the one target_kl cut short included.
             model.logger.record("train/epochs_run", updates_done(model) - epochs_before)
         finished_at = time.perf_counter()
