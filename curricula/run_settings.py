@@ -52,6 +52,16 @@ def learning_rate(name: str, value: Any) -> LearningRate:
     return parse_settings(name, value, LearningRateDecay)
 
 
+def names(name: str, value: Any) -> tuple[str, ...]:
+    if value is None:
+        return ()
+    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
+        raise ValueError(f"{name}: expected a list of names, got {value!r}")
+    if len(set(value)) != len(value):
+        raise ValueError(f"{name}: a name is listed twice in {list(value)!r}")
+    return tuple(value)
+
+
 def layers(name: str, value: Any) -> tuple[int, ...]:
     # []: the LSTMs feed the action and value heads directly (the 2022 phase-1 network).
     if not isinstance(value, (list, tuple)):
@@ -103,6 +113,10 @@ class PolicyConfig:
     lattice_full_std: bool = setting(False, parse=boolean,
                                      help="one std per noise-matrix entry, not per latent feature (Lattice)")
     noise_resample_every: int = setting(1, parse=integer(low=1), help="control steps between Lattice noise draws")
+    critic_extra: tuple[str, ...] = setting(
+        (), parse=lambda name, value: names(name, value),
+        help="privileged features only the critic sees in training, by name (the task's: e.g. die_velocity, "
+             "fingertips, physics); the actor, exported policies and evaluate.py see the official observation")
 
 
 @dataclass(frozen=True)

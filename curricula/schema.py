@@ -348,6 +348,13 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
         values["rollout"] = RolloutConfig(**{**rollout_config.__dict__, "envs_per_worker": per_worker})
         values["n_envs"] = rollout_config.workers * per_worker
     curriculum = load_curriculum(curriculum_path, curriculum_overrides)
+    privileged = TASK_SPECS[curriculum.task].privileged
+    for name in values["policy"].critic_extra:
+        if name not in privileged:
+            raise reader.error("policy.critic_extra", f"{name!r} is not a privileged feature of the {curriculum.task} "
+                               f"task; allowed: {', '.join(privileged)}")
+    if values["policy"].critic_extra and not values["policy"].fast_lstm_update:
+        raise reader.error("policy.critic_extra", "needs policy.fast_lstm_update: true (it lives in the fast policy class)")
     origins = {dotted: reader.origin(dotted) for dotted in _flat_keys(raw)}
     config = RunConfig(curriculum=curriculum, curriculum_path=curriculum_path, source=raw, origins=origins, **values)
     rollout = config.ppo.n_steps * config.n_envs

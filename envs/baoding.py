@@ -40,11 +40,12 @@ from myo_sds.envs.baoding_task import (  # noqa: F401  (re-exported: the env's p
     OFFICIAL_START_ANGLE,
     ON_BALLS_START_ANGLE,
     ORBIT_CENTER,
+    PRIVILEGED,
     REWARD_TERMS,
     BaodingKnobs,
     BaodingTask,
 )
-from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
+from myo_sds.envs.hand_env import FINGERTIP_SITES, MuscleHandEnv, vector_norm
 from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs
 
 
@@ -68,6 +69,7 @@ class BaodingEnv(MuscleHandEnv):
     KNOBS_CLASS = BaodingKnobs
     REWARD_TERMS = REWARD_TERMS
     metadata = {"render_modes": ["rgb_array"], "render_fps": 40}
+    PRIVILEGED = PRIVILEGED
 
     def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, horizon: int = HORIZON, *,
                  distribution: TaskKnobs | None = None, **knobs: Any) -> None:
@@ -90,6 +92,7 @@ class BaodingEnv(MuscleHandEnv):
         self._init_qpos[:N_HAND_JOINTS] = 0.0
         self._init_qpos[0] = -1.57  # palm up, as the official env
         self._obs = np.zeros(self.OBS_SIZE)
+        self._tip_sites = [model.site(name).id for name in FINGERTIP_SITES]
         self._target_angle = 0.0  # the first target's angle on its orbit at this step
         self._balls_placed = False  # whether this episode's balls were put on their targets (RSI)
 
@@ -152,6 +155,13 @@ class BaodingEnv(MuscleHandEnv):
         return float(math.atan2(local[1] / self.task.y_radius, local[0] / self.task.x_radius) % (2 * np.pi))
 
     def _before_physics(self) -> None:
+        self._place_targets(self._counter)
+
+    def _next_goal(self, offset, rng: np.random.Generator) -> None:
+        """The targets jump along their orbit by U(offset) rad (default +-45 degrees), keeping
+        their direction and period: the task's start angle moves by that much."""
+        shift = offset.sample(rng) if offset is not None else float(rng.uniform(-math.pi / 4, math.pi / 4))
+        self.task = replace(self.task, start_angle=float((self.task.start_angle + shift) % (2 * np.pi)))
         self._place_targets(self._counter)
 
     def _episode_label(self) -> str:
@@ -298,6 +308,21 @@ class BaodingEnv(MuscleHandEnv):
         obs[44:47] = obs[38:41] - obs[29:32]
         obs[47:86] = data.act
         return obs
+
+    def _privileged_feature(self, name: str) -> np.ndarray:
+        data, task = self.data, self.task
+        if name == "ball_spin":
+            return np.concatenate([data.qvel[dof + 3:dof + 6] for dof in self._ball_dof])
+        if name == "fingertips":
+            middle = data.site_xpos[list(self._ball_sites)].mean(axis=0)
+            return (data.site_xpos[self._tip_sites] - middle).ravel()
+        if name == "physics":
+            return np.array([*task.ball_size, *task.ball_mass, *task.ball_friction[0], *task.ball_friction[1]])
+        if name == "goal_phase":
+            speed = 0.0 if math.isinf(task.period) else 1.0 / task.period
+            return np.array([math.cos(self._target_angle), math.sin(self._target_angle),
+                             _DIRECTION_SIGN[task.direction], speed])
+        raise KeyError(name)
 
     def _reward_terms(self) -> dict[str, float]:
         obs, knobs = self._obs, self.knobs

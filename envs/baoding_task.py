@@ -13,12 +13,14 @@ from typing import Any, ClassVar
 import numpy as np
 
 from myo_sds.envs.knobs import (
+    GoalChain,
     Range,
     RecordedStart,
     TaskKnobs,
     check_complete,
     choice,
     count,
+    goal_chain_setting,
     optional,
     parse_choice,
     parse_probability,
@@ -49,6 +51,16 @@ NOMINAL_FRICTION = (1.0, 0.005, 0.0001)
 REWARD_TERMS = ("pos_dist_1", "pos_dist_2", "act_reg", "solved", "alive", "done", "sparse")
 N_HAND_JOINTS = 23
 N_WRIST_JOINTS = 3  # pro_sup, deviation, flexion; the other 20 hand joints are fingers
+
+
+# Features of the simulation the official observation leaves out, by name: (size, meaning); a
+# critic may see them in training (policy.critic_extra).
+PRIVILEGED = {
+    "ball_spin": (6, "each ball's angular velocity (rad/s)"),
+    "fingertips": (15, "the five fingertips' positions relative to the midpoint of the balls (m)"),
+    "physics": (10, "each ball's radius, mass and sliding / torsional / rolling friction"),
+    "goal_phase": (4, "cos and sin of the first target's orbit angle, the direction (-1, 0, 1), revolutions per s"),
+}
 
 
 @dataclass(frozen=True)
@@ -165,6 +177,8 @@ class BaodingKnobs(TaskKnobs):
                                 "x, y at the ball's resting height, as the 2022 winner's env)")
     recorded_start: RecordedStart | None = recorded_start_setting(
         "the targets are placed on the balls (plus start_offset), with the stage's direction and period")
+    goal_chain: GoalChain | None = goal_chain_setting(
+        "U(-0.785, 0.785) rad: the targets jump up to 45 degrees along their orbit, direction and period kept")
     ball_size: Range | None = setting(None, parse=optional(ranged(positive=True)),
                                    help="m, ball radius: null (model's 0.022), a value, or [min, max]")
     ball_mass: Range | None = setting(None, parse=optional(ranged(positive=True)),
@@ -192,7 +206,7 @@ def _official_2022_start(env) -> None:
 
 SPEC = TaskSpec(
     name="baoding", knobs=BaodingKnobs, reward_terms=REWARD_TERMS, env_path="myo_sds.envs.baoding:BaodingEnv",
-    episode_score=solved_fraction, gym_name="Baoding",
+    episode_score=solved_fraction, gym_name="Baoding", privileged=PRIVILEGED,
     official_ids={"p1": "myoChallengeBaodingP1-v1", "p1_2022": "myoChallengeBaodingP1-v1",
                   "p2": "myoChallengeBaodingP2-v1"},
     official_setup={"p1_2022": _official_2022_start},

@@ -15,6 +15,7 @@ instance as the official env for the same seed):
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import mujoco
@@ -25,13 +26,14 @@ from myo_sds.envs.die_task import (  # noqa: F401  (re-exported: the env's publi
     HORIZON,
     MODEL_FILE,
     N_HAND_JOINTS,
+    PRIVILEGED,
     REWARD_TERMS,
     DieKnobs,
     DieTask,
 )
-from myo_sds.envs.hand_env import MuscleHandEnv, vector_norm
+from myo_sds.envs.hand_env import FINGERTIP_SITES, MuscleHandEnv, vector_norm
 from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs
-from myo_sds.envs.physics import euler_to_quat, mat_to_euler, refresh_bodies
+from myo_sds.envs.physics import euler_to_quat, mat_to_euler, quat_to_mat, refresh_bodies
 
 
 class DieEnv(MuscleHandEnv):
@@ -54,6 +56,7 @@ class DieEnv(MuscleHandEnv):
     REWARD_TERMS = REWARD_TERMS
     ACTION_DTYPE = np.float64
     metadata = {"render_modes": ["rgb_array"], "render_fps": 100}
+    PRIVILEGED = PRIVILEGED
 
     def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None, horizon: int = HORIZON, *,
                  distribution: TaskKnobs | None = None, **knobs: Any) -> None:
@@ -80,6 +83,8 @@ class DieEnv(MuscleHandEnv):
         self._goal_init_pos = data.site_xpos[self._goal_site].copy()
         self._goal_object_offset = data.site_xpos[self._goal_site] - data.site_xpos[self._object_site]
         self._obs = np.zeros(self.OBS_SIZE)
+        self._tip_sites = [model.site(name).id for name in FINGERTIP_SITES]
+        self._die_dofs = slice(model.nv - 6, model.nv - 3)  # the die's three slide joints: its linear velocity
         self._applied_physics: tuple[float, float] | None = None
 
     def sample_task(self, rng: np.random.Generator) -> DieTask:
@@ -103,6 +108,22 @@ class DieEnv(MuscleHandEnv):
             hand = self.data.qpos[:N_HAND_JOINTS]
             hand += rng.uniform(-noise, noise, N_HAND_JOINTS)
             np.clip(hand, self._joint_low, self._joint_high, out=hand)
+
+    def _next_goal(self, offset, rng: np.random.Generator) -> None:
+        """A new goal from the current one, as PKU-MARL chained them: its orientation turned by a
+        random rotation of U(offset) rad about each axis (default: the stage's goal_rotation),
+        composed onto the current goal's; its position drawn anew from goal_position. The die's
+        physics stay."""
+        k = self.knobs
+        position = rng.uniform(high=k.goal_position.high, low=k.goal_position.low, size=3)
+        ranges = (offset,) * 3 if offset is not None else k.goal_rotation
+        turn = rng.uniform(high=[r.high for r in ranges], low=[r.low for r in ranges])
+        quat = np.empty(4)
+        mujoco.mju_mulQuat(quat, self.model.body_quat[self._goal_body], euler_to_quat(turn))
+        euler = mat_to_euler(quat_to_mat(quat))
+        self.task = replace(self.task, goal_offset=tuple(position.tolist()), goal_euler=tuple(euler.tolist()))
+        self.model.body_pos[self._goal_body] = self._goal_init_pos + position
+        self.model.body_quat[self._goal_body] = quat
 
     def _task_for_recorded_state(self, task: DieTask, rng: np.random.Generator) -> DieTask:
         """The goal stays the one drawn for this episode: the die starts where an earlier episode
@@ -147,15 +168,30 @@ class DieEnv(MuscleHandEnv):
         obs[63:102] = data.act
         return obs
 
+    def _privileged_feature(self, name: str) -> np.ndarray:
+        data, task = self.data, self.task
+        if name == "die_velocity":
+            return data.qvel[-6:].copy()
+        if name == "fingertips":
+            return (data.site_xpos[self._tip_sites] - data.site_xpos[self._object_site]).ravel()
+        if name == "physics":
+            return np.array([task.mass, task.size_change, *np.mean(task.friction, axis=0)])
+        raise KeyError(name)
+
     def _reward_terms(self) -> dict[str, float]:
         obs, k = self._obs, self.knobs
         pos_dist = vector_norm(obs[51:54])
         rot_dist = vector_norm(obs[60:63])
         dropped = pos_dist > k.drop_threshold
         solved = pos_dist < k.position_threshold and rot_dist < k.rotation_threshold and not dropped
+        data = self.data
+        tips = data.site_xpos[self._tip_sites] - data.site_xpos[self._object_site]
         return {
             "pos_dist": -pos_dist,
             "rot_dist": -rot_dist,
+            "rot_kernel": k.rotation_kernel_width / (rot_dist**2 + k.rotation_kernel_width),
+            "tip_dist": -float(np.sqrt((tips**2).sum(axis=1)).sum()),
+            "die_speed": -vector_norm(data.qvel[self._die_dofs]),
             "bonus": float(pos_dist < 2 * k.position_threshold) + float(pos_dist < k.position_threshold),
             "act_reg": -vector_norm(obs[63:102]) / self.model.na,
             "penalty": -float(dropped),

@@ -10,10 +10,12 @@ from dataclasses import asdict, dataclass
 from typing import Any, ClassVar
 
 from myo_sds.envs.knobs import (
+    GoalChain,
     Range,
     RecordedStart,
     TaskKnobs,
     check_complete,
+    goal_chain_setting,
     parse_range,
     ranged,
     recorded_start_setting,
@@ -30,7 +32,20 @@ MODEL_FILE = "myohand_die.xml"
 HORIZON = 150  # control steps of 10 ms
 FRAME_SKIP = 5
 N_HAND_JOINTS = 23
-REWARD_TERMS = ("pos_dist", "rot_dist", "bonus", "act_reg", "penalty", "sparse", "solved", "done")
+# The official terms, then shaping terms of 2022 entries (PKU-MARL): the rotation error through a
+# bounded kernel w / (d^2 + w) (1 on the goal, half at d = sqrt(w)), the summed fingertip-to-die
+# distance and the die's speed (both negative). ``solved`` weighted is a bonus per solved step.
+REWARD_TERMS = ("pos_dist", "rot_dist", "bonus", "act_reg", "penalty", "sparse", "solved", "done",
+                "rot_kernel", "tip_dist", "die_speed")
+
+
+# Features of the simulation the official observation leaves out, by name: (size, meaning); a
+# critic may see them in training (policy.critic_extra).
+PRIVILEGED = {
+    "die_velocity": (6, "the die's linear (m/s) and angular (rad/s) joint velocities"),
+    "fingertips": (15, "the five fingertips' positions relative to the die (m)"),
+    "physics": (5, "the die's mass, size change and mean sliding / torsional / rolling friction"),
+}
 
 
 @dataclass(frozen=True)
@@ -91,6 +106,11 @@ class DieKnobs(TaskKnobs):
     hand_noise: float = setting(0.0, parse=scalar(minimum=0.0), help="rad, uniform +- noise on the 23 hand joints at reset")
     recorded_start: RecordedStart | None = recorded_start_setting(
         "the goal is drawn as the stage's knobs say (solved_only: false records unsolved steps too)")
+    goal_chain: GoalChain | None = goal_chain_setting(
+        "the stage's goal_rotation; each new goal: the current orientation turned by a random rotation of "
+        "U(offset) about each axis, at a new position drawn from goal_position")
+    rotation_kernel_width: float = setting(0.2, parse=scalar(positive=True),
+                                           help="rad^2, w of the rot_kernel reward term w / (d^2 + w)")
     position_threshold: float = setting(0.025, parse=scalar(positive=True),
                                      help="m, solved when the die is closer than this to the goal ...")
     rotation_threshold: float = setting(0.262, parse=scalar(positive=True),
@@ -104,7 +124,7 @@ class DieKnobs(TaskKnobs):
 
 SPEC = TaskSpec(
     name="die", knobs=DieKnobs, reward_terms=REWARD_TERMS, env_path="myo_sds.envs.die:DieEnv",
-    episode_score=solved_on_more_than(SUCCESS_STEPS), gym_name="Die",
+    episode_score=solved_on_more_than(SUCCESS_STEPS), gym_name="Die", privileged=PRIVILEGED,
     official_ids={"p1": "myoChallengeDieReorientP1-v0", "p2": "myoChallengeDieReorientP2-v0"},
     hand_joints=N_HAND_JOINTS,
     # The orientation error the score measures (norm of the Euler-angle differences), at the start.

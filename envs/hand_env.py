@@ -23,6 +23,9 @@ _INSTABILITY_WARNINGS = np.array([mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWa
                                   mujoco.mjtWarning.mjWARN_BADQACC], dtype=int)
 
 
+FINGERTIP_SITES = ("THtip", "IFtip", "MFtip", "RFtip", "LFtip")  # sites of both task models
+
+
 def vector_norm(vector: np.ndarray) -> float:
     """Euclidean norm of a 1-D float array; the same arithmetic as ``np.linalg.norm``, faster."""
     return math.sqrt(vector.dot(vector))
@@ -94,8 +97,13 @@ class MuscleHandEnv(gym.Env):
     ACTION_DTYPE: ClassVar[type | None] = None
     metadata = {"render_modes": ["rgb_array"]}
 
+    # Features of the simulation the official observation leaves out, by name (size, meaning), that
+    # a critic may see in training (``policy.critic_extra``): appended to the observation in order.
+    PRIVILEGED: ClassVar[Mapping[str, tuple[int, str]]] = {}
+
     def __init__(self, preset: str = DEFAULT_PRESET, render_mode: str | None = None,
-                 horizon: int | None = None, *, distribution: TaskKnobs | None = None, **knobs: Any) -> None:
+                 horizon: int | None = None, *, distribution: TaskKnobs | None = None,
+                 privileged: tuple[str, ...] = (), **knobs: Any) -> None:
         super().__init__()
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode: {render_mode!r} is not one of None, 'rgb_array'")
@@ -108,7 +116,13 @@ class MuscleHandEnv(gym.Env):
         self._scratch = mujoco.MjData(self.model)  # for mj_setConst after geometry edits
         self.dt = self.model.opt.timestep * self.FRAME_SKIP
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.model.nu,), np.float32)
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (self.OBS_SIZE,), np.float32)
+        unknown = [name for name in privileged if name not in self.PRIVILEGED]
+        if unknown:
+            raise ValueError(f"privileged: {', '.join(map(repr, unknown))} not among the {self.TASK_NAME} task's "
+                             f"{', '.join(self.PRIVILEGED) or 'none'}")
+        self.privileged = tuple(privileged)
+        size = self.OBS_SIZE + sum(self.PRIVILEGED[name][0] for name in self.privileged)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (size,), np.float32)
         self.task: Any = None
         self._counter = 0
         self.state_bank: StateBank | None = None  # states of earlier episodes (``recorded_start`` knob)
@@ -144,6 +158,17 @@ class MuscleHandEnv(gym.Env):
         """Fill and return the float64 observation buffer."""
         raise NotImplementedError
 
+    def _privileged_feature(self, name: str) -> np.ndarray:
+        """One of :attr:`PRIVILEGED`, at the current state (after :meth:`_observe`)."""
+        raise NotImplementedError
+
+    def _observation(self) -> np.ndarray:
+        """What the agent gets: the official observation, then the privileged features asked for."""
+        obs = self._observe()
+        if self.privileged:
+            obs = np.concatenate([obs, *(self._privileged_feature(name) for name in self.privileged)])
+        return obs.astype(np.float32)
+
     def _reward_terms(self) -> dict[str, float]:
         raise NotImplementedError
 
@@ -167,6 +192,11 @@ class MuscleHandEnv(gym.Env):
     def _goal_phase(self) -> float | None:
         """Where on its path the goal is at this step (rad), for reports by goal phase."""
         return None
+
+    def _next_goal(self, offset, rng: np.random.Generator) -> None:
+        """Chained goals (``goal_chain`` knob): move the goal on from the current one (``offset``:
+        the knob's range, None for the task's default). Tasks that declare the knob implement it."""
+        raise NotImplementedError(f"{type(self).__name__} does not support chained goals")
 
     def _task_for_recorded_state(self, task: Any, rng: np.random.Generator) -> Any:
         """The episode's task once a recorded state has replaced the start: its goal placed
@@ -218,8 +248,8 @@ class MuscleHandEnv(gym.Env):
         task = self.task
         # The observation needs positions only; mj_step computes everything else itself.
         mujoco.mj_kinematics(self.model, self.data)
-        obs = self._observe().astype(np.float32)
-        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "reward": 0.0, "length": 0,
+        obs = self._observation()
+        self._episode = {"solved_steps": 0, "effort_sum": 0.0, "reward": 0.0, "length": 0, "goals": 0, "on_goal": 0,
                          "start_phase": self._episode_start_phase(), "start": self._episode_start_kind(),
                          "phase_steps": [0] * PHASE_SECTORS, "phase_solved": [0] * PHASE_SECTORS}
         return obs, {"task": task}
@@ -235,7 +265,7 @@ class MuscleHandEnv(gym.Env):
             raise RuntimeError("move_hand_joints: only at the start of an episode, before the first step")
         self.data.qpos[:len(offsets)] += offsets
         mujoco.mj_forward(self.model, self.data)
-        return self._observe().astype(np.float32)
+        return self._observation()
 
     def _recorded_start_knob(self):
         return getattr(self.knobs, "recorded_start", None)
@@ -280,7 +310,7 @@ class MuscleHandEnv(gym.Env):
         mujoco.mj_kinematics(model, data)
         self._counter += 1
         unstable = bool(data.warning.number[_INSTABILITY_WARNINGS].any())
-        obs = self._observe().astype(np.float32)
+        obs = self._observation()
         terms = self._reward_terms()
         reward = 0.0
         for key, weight in self.knobs.reward_weights.items():  # in order, as the official sum
@@ -297,6 +327,14 @@ class MuscleHandEnv(gym.Env):
         episode["solved_steps"] += int(terms["solved"])
         episode["effort_sum"] -= terms["act_reg"]
         episode["reward"] += reward
+        chain = getattr(self.knobs, "goal_chain", None)
+        if chain is not None and terms["solved"] and not (terminated or truncated):
+            episode["on_goal"] += 1
+            if episode["on_goal"] >= chain.after_solved:
+                episode["on_goal"], episode["goals"] = 0, episode["goals"] + 1
+                self._next_goal(chain.offset, self.np_random)
+                mujoco.mj_kinematics(model, data)  # the new goal is in this step's observation
+                obs = self._observation()
         phase = self._goal_phase()
         if phase is not None:
             sector = phase_sector(phase)
@@ -308,7 +346,8 @@ class MuscleHandEnv(gym.Env):
                 solved_steps=episode["solved_steps"], length=episode["length"], horizon=horizon,
                 dropped=bool(terms["done"]), effort=episode["effort_sum"] / episode["length"],
                 direction=self._episode_label(), task=self.TASK_NAME, start_phase=episode["start_phase"],
-                reward=episode["reward"], start=episode["start"], **self._phase_counts(episode))
+                reward=episode["reward"], start=episode["start"],
+                goals_reached=episode["goals"] if chain is not None else None, **self._phase_counts(episode))
         return obs, reward, terminated, truncated, info
 
     @staticmethod

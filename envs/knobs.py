@@ -189,6 +189,29 @@ def parse_recorded_start(name: str, value: Any) -> RecordedStart:
     return parse_settings(name, value, RecordedStart)
 
 
+@dataclass(frozen=True)
+class GoalChain:
+    """Goals chained inside an episode: after ``after_solved`` solved steps (counted since the
+    current goal was set, not necessarily in a row) the episode goes on with a new goal, drawn
+    relative to the current one (each task says how: ``offset``). The episode's horizon and
+    score rule stay; its result counts the goals reached. PKU-MARL chained die goals this way
+    in 2022 (after 5 solved steps); AL4Muscles re-drew Baoding targets at new phases."""
+
+    after_solved: int = setting(5, parse=lambda name, value: count()(name, value),
+                                help="solved steps on a goal before the next one is drawn")
+    offset: Range | None = setting(None, parse=lambda name, value: None if value is None else parse_range(name, value),
+                                   help="the new goal relative to the current one (Baoding: rad added to the "
+                                        "targets' phase; the die: rad of the random rotation about each axis "
+                                        "composed onto the goal's orientation); null: the task's default")
+
+
+def goal_chain_setting(default_offset: str):
+    """The ``goal_chain`` knob of a task; ``default_offset`` says what a null ``offset`` means."""
+    return setting(None, parse=optional(lambda name, value: parse_settings(name, value, GoalChain)),
+                   help="null, or {after_solved: 5, offset: [low, high]}: after that many solved steps the episode "
+                        f"goes on with a new goal; offset null: {default_offset}")
+
+
 # -- declaring a task's knobs --------------------------------------------------------------
 
 DEFAULT_PRESET = "p1"

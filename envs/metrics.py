@@ -53,6 +53,8 @@ class EpisodeResult:
     # (the balls where the hand holds them, the targets wherever the task starts them) or
     # "recorded" (a banked state of an earlier episode); None where the task does not say.
     start: str | None = None
+    # With chained goals (``goal_chain``): how many goals the episode reached (None: no chain).
+    goals_reached: int | None = None
 
     @property
     def score(self) -> float:

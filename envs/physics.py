@@ -96,3 +96,10 @@ def mat_to_euler(mat: np.ndarray) -> np.ndarray:
         return np.array([-np.arctan2(mat[1, 2], mat[2, 2]), -np.arctan2(-mat[0, 2], cy),
                          -np.arctan2(mat[0, 1], mat[0, 0])])
     return np.array([0.0, -np.arctan2(-mat[0, 2], cy), -np.arctan2(-mat[1, 0], mat[1, 1])])
+
+
+def quat_to_mat(quat: np.ndarray) -> np.ndarray:
+    """A MuJoCo quaternion (w, x, y, z) to its 3x3 rotation matrix."""
+    mat = np.empty(9)
+    mujoco.mju_quat2Mat(mat, np.asarray(quat, dtype=np.float64))
+    return mat.reshape(3, 3)

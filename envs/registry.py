@@ -48,6 +48,8 @@ class TaskSpec:
             and the official one alike), which ``evaluate.py --start-noise`` moves at reset; 0 for a
             task without them.
         start_phase_name: what an episode's ``start_phase`` (rad) measures, as reports name it.
+        privileged: features the official observation leaves out, by name: (size, meaning); a
+            critic may see them in training (``policy.critic_extra``).
     """
 
     name: str
@@ -59,6 +61,7 @@ class TaskSpec:
     official_ids: Mapping[str, str] = field(default_factory=dict)
     official_setup: Mapping[str, Callable[[Any], None]] = field(default_factory=dict)
     preset_notes: Mapping[str, str] = field(default_factory=dict)
+    privileged: Mapping[str, tuple[int, str]] = field(default_factory=dict)
     hand_joints: int = 0
     start_phase_name: str = "the start phase"
 

@@ -36,17 +36,31 @@ class SequenceLstmPolicy(RecurrentActorCriticPolicy):
     an optional soft bound on the action mean and an optional learning-rate scale for the
     actor's output layer."""
 
-    def __init__(self, *args, action_mean_bound: float = 0.0, action_head_lr_scale: float = 1.0, **kwargs):
+    def __init__(self, *args, action_mean_bound: float = 0.0, action_head_lr_scale: float = 1.0,
+                 actor_observation_size: int | None = None, **kwargs):
         self.action_mean_bound = action_mean_bound
         self.action_head_lr_scale = action_head_lr_scale
+        self.actor_observation_size = actor_observation_size
         super().__init__(*args, **kwargs)
         with th.no_grad():  # the same initial function as without the scale
             self.action_net.weight.div_(action_head_lr_scale)
             self.action_net.bias.div_(action_head_lr_scale)
+        if actor_observation_size is not None and actor_observation_size != self.features_dim:
+            # A privileged critic: the actor's LSTM reads the official observation (the first
+            # ``actor_observation_size`` values), the critic all of it.
+            if self.shared_lstm or self.features_dim < actor_observation_size:
+                raise ValueError(f"actor_observation_size {actor_observation_size} needs separate LSTMs and at "
+                                 f"most the observation's {self.features_dim} values")
+            lstm = self.lstm_actor
+            self.lstm_actor = th.nn.LSTM(actor_observation_size, lstm.hidden_size, num_layers=lstm.num_layers,
+                                         **self.lstm_kwargs)
+            self.optimizer = self.optimizer_class(self.parameters(), lr=self.optimizer.defaults["lr"],
+                                                  **self.optimizer_kwargs)
 
     def _get_constructor_parameters(self) -> dict:
         return {**super()._get_constructor_parameters(), "action_mean_bound": self.action_mean_bound,
-                "action_head_lr_scale": self.action_head_lr_scale}
+                "action_head_lr_scale": self.action_head_lr_scale,
+                "actor_observation_size": self.actor_observation_size}
 
     def _get_action_dist_from_latent(self, latent_pi: th.Tensor):
         if not self.action_mean_bound and self.action_head_lr_scale == 1.0:
@@ -57,9 +71,10 @@ class SequenceLstmPolicy(RecurrentActorCriticPolicy):
             mean_actions = bound * th.tanh(mean_actions / bound)
         return self.action_dist.proba_distribution(mean_actions, self.log_std)
 
-    @staticmethod
-    def _process_sequence(features: th.Tensor, lstm_states: tuple[th.Tensor, th.Tensor],
+    def _process_sequence(self, features: th.Tensor, lstm_states: tuple[th.Tensor, th.Tensor],
                           episode_starts: th.Tensor, lstm: th.nn.LSTM) -> tuple[th.Tensor, th.Tensor]:
+        if features.shape[-1] != lstm.input_size:  # the actor of a privileged critic: the official part
+            features = features[..., :lstm.input_size]
         n_seq = lstm_states[0].shape[1]
         starts = episode_starts.reshape((n_seq, -1)).swapaxes(0, 1)  # (length, n_seq)
         if not th.all(starts[1:] == 0.0):

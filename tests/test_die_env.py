@@ -217,3 +217,69 @@ def test_episodes_report_the_goal_angle_at_their_start():
     while not (terminated or truncated):
         _, _, terminated, truncated, info = recorded.step(rng.uniform(-1, 1, 39).astype(np.float32))
     assert info["episode_result"].start_phase == pytest.approx(expected) and expected > 0
+
+
+def test_shaping_terms_match_hand_computed_values_and_leave_the_score_alone():
+    """rot_kernel = w / (d^2 + w) of the rotation error d; tip_dist = -(sum of the five fingertips'
+    distances to the die); die_speed = -|the die's linear velocity|; the reward is the weighted sum
+    of the terms; the score is the official one whatever the weights."""
+    weights = {"rot_kernel": 0.3, "tip_dist": 2.0, "die_speed": 0.5, "solved": 25.0, "pos_dist": 10.0}
+    env = DieEnv(rotation_kernel_width=0.5, reward_weights=weights)
+    official = DieEnv()
+    env.reset(seed=4), official.reset(seed=4)
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        action = rng.uniform(-1, 1, 39)
+        obs, reward, terminated, truncated, info = env.step(action)
+        official_obs, *_, official_info = official.step(action)
+        np.testing.assert_array_equal(obs, official_obs)
+        d = np.linalg.norm(obs[60:63])
+        assert info["rot_kernel"] == pytest.approx(0.5 / (d**2 + 0.5))
+        data = env.data
+        tips = [data.site(name).xpos for name in ("THtip", "IFtip", "MFtip", "RFtip", "LFtip")]
+        die = data.site("object_o").xpos
+        assert info["tip_dist"] == pytest.approx(-sum(np.linalg.norm(t - die) for t in tips))
+        assert info["die_speed"] == pytest.approx(-np.linalg.norm(data.qvel[-6:-3]))
+        assert reward == pytest.approx(sum(w * info[k] for k, w in weights.items()))
+        assert info["solved"] == official_info["solved"]
+        if terminated or truncated:
+            break
+
+
+def test_chained_goals_turn_the_goal_on_from_the_current_one_and_count_the_goals_reached():
+    """After 2 solved steps the goal turns by a random rotation composed onto the current one (a
+    goal on the resting die is solved at once, so the chain starts at step 2), seeded; the
+    official score rule counts the solved steps of every goal."""
+    def play(seed):
+        env = DieEnv(goal_position=0.0, goal_rotation=0.0, goal_chain={"after_solved": 2, "offset": [-0.3, 0.3]},
+                     horizon=6)
+        env.reset(seed=seed)
+        goals = [env.model.body_quat[env.model.body("target").id].copy()]
+        for _ in range(6):
+            *_, info = env.step(np.zeros(39))
+            goals.append(env.model.body_quat[env.model.body("target").id].copy())
+        return env, np.array(goals), info
+
+    env, goals, info = play(2)
+    assert np.allclose(goals[0], [1, 0, 0, 0]) and np.allclose(goals[1], goals[0])
+    changed = [i for i in range(1, len(goals)) if not np.allclose(goals[i], goals[i - 1])]
+    assert changed[0] == 2  # the second solved step draws the next goal
+    # The new goal is the old one turned by at most 0.3 rad about each axis: its angle from it.
+    turn = np.empty(4)
+    mujoco.mju_mulQuat(turn, np.array([goals[1][0], *-goals[1][1:]]), goals[2])
+    assert 0 < 2 * np.arccos(min(1.0, abs(turn[0]))) <= np.sqrt(3) * 0.3 + 1e-9
+    # The task records the goal; the observation shows it the step it is drawn.
+    np.testing.assert_allclose(euler_to_quat(np.array(env.task.goal_euler)), goals[-1], atol=1e-9)
+    result = info["episode_result"]  # the 6-step episode: its goals and its solved steps on all of them
+    assert result.goals_reached == len(changed) >= 1 and result.solved_steps >= 2 * len(changed)
+    assert result.score == (1.0 if result.solved_steps > 5 else 0.0)
+    _, again, _ = play(2)
+    np.testing.assert_array_equal(goals, again)  # seeded: the same chain
+    _, other, _ = play(3)
+    assert not np.allclose(goals, other)
+    env = DieEnv(goal_chain={"after_solved": 1})
+    assert env.knobs.goal_chain.offset is None  # null: the stage's goal_rotation
+    with pytest.raises(ValueError, match="goal_chain.after_solved: expected a whole number >= 1"):
+        DieEnv(goal_chain={"after_solved": 0})
+    with pytest.raises(ValueError, match="goal_chain.afer: unknown key"):
+        DieEnv(goal_chain={"afer": 2})

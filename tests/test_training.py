@@ -517,3 +517,58 @@ def test_ctrl_c_at_any_moment_leaves_a_resumable_run_or_none(tmp_path):
         else:
             outcomes.append("none")
     assert "resumable" in outcomes  # the later signals came after training began
+
+
+def test_a_privileged_critic_sees_more_than_the_actor_and_the_policy_runs_on_the_official_observation(tmp_path):
+    """policy.critic_extra: the envs append the named features, the critic reads them, the actor's
+    LSTM only the official 86 values; evaluate.py and the resumed run use it as any policy; a policy
+    trained without extras starts one with the same value function."""
+    import numpy as np
+
+    from myo_sds import evaluation as ev
+    from myo_sds.envs.baoding import BaodingEnv
+
+    plain_run, run = tmp_path / "plain", tmp_path / "run"
+    plain = CurriculumTrainer.start(write_config(tmp_path, total=128), run_dir=plain_run, progress=False)
+    plain.run()
+    plain.close()
+    extra = ("policy.critic_extra=[ball_spin, fingertips, physics, goal_phase]",)
+    trainer = CurriculumTrainer.start(tmp_path / "run.yaml", extra, run_dir=run, progress=False,
+                                      init_from=plain_run)
+    policy, venv = trainer.model.policy, trainer.venv
+    assert venv.observation_space.shape == (86 + 6 + 15 + 10 + 4,)
+    assert (policy.lstm_actor.input_size, policy.lstm_critic.input_size) == (86, 121)
+    # Started from the plain policy: the same value of the same (normalized) official observation,
+    # whatever the extra inputs (the critic's weights on them are zero), and the same actions.
+    from sb3_contrib.common.recurrent.type_aliases import RNNStates
+
+    obs = np.random.default_rng(0).normal(size=(4, 121)).astype(np.float32)
+    starts = torch.ones(4)
+
+    def zeros(p):
+        shape = (p.lstm_actor.num_layers, 4, p.lstm_actor.hidden_size)
+        return RNNStates((torch.zeros(shape), torch.zeros(shape)), (torch.zeros(shape), torch.zeros(shape)))
+
+    with torch.no_grad():
+        values_plain = plain.model.policy.predict_values(torch.as_tensor(obs[:, :86]), zeros(plain.model.policy).vf, starts)
+        values = policy.predict_values(torch.as_tensor(obs), zeros(policy).vf, starts)
+        torch.testing.assert_close(values, values_plain)
+        # The actor ignores the extra inputs.
+        mean = policy.get_distribution(torch.as_tensor(obs), zeros(policy).pi, starts)[0].distribution.mean
+        shuffled = obs.copy()
+        shuffled[:, 86:] = 3.0
+        again = policy.get_distribution(torch.as_tensor(shuffled), zeros(policy).pi, starts)[0].distribution.mean
+        torch.testing.assert_close(mean, again)
+    state = trainer.run()
+    trainer.close()
+    assert state.num_timesteps == 128
+    CurriculumTrainer.resume(run, progress=False, total_steps=256).run()
+    # Evaluated on the official observation (86 values), the policy's own env: the same episodes.
+    ref = ev.resolve_checkpoint(run)
+    report = ev.evaluate(ref, ev.choose_env(ref, "stage:easy"), episodes=2)
+    assert len(report.episodes) == 2 and BaodingEnv().observation_space.shape == (86,)
+    for bad, message in (("policy.critic_extra=[die_velocity]", "'die_velocity' is not a privileged feature of "
+                                                                 "the baoding task; allowed: ball_spin"),
+                         ("policy.critic_extra=[physics, physics]", "listed twice")):
+        with pytest.raises(ConfigError, match=message):
+            CurriculumTrainer.start(tmp_path / "run.yaml", (bad,), run_dir=tmp_path / "bad", progress=False)

@@ -94,6 +94,9 @@ class LoadedPolicy:
 
     def act(self, obs: np.ndarray, state, episode_start: bool):
         batch = obs[None]
+        full = self.model.observation_space.shape[0]
+        if batch.shape[1] < full:  # a privileged critic's extra inputs: the actor never reads them
+            batch = np.concatenate([batch, np.zeros((1, full - batch.shape[1]), batch.dtype)], axis=1)
         if self.normalizer is not None:
             batch = self.normalizer.normalize_obs(batch)
         action, state = self.model.predict(batch, state=state, episode_start=np.array([episode_start]),
@@ -114,7 +117,9 @@ def load_policy(ref: CheckpointRef, task: str) -> LoadedPolicy:
                               "it is not a complete RecurrentPPO model archive") from None
     expected = TASK_SPECS[task].env_class().OBS_SIZE
     shape = model.observation_space.shape
-    if shape != (expected,):
+    # A policy trained with a privileged critic takes more, but its actor reads the official part.
+    actor_size = getattr(model.policy, "actor_observation_size", None) or shape[0]
+    if actor_size != expected:
         raise EvaluationError(f"{ref.model}: the policy takes observations of shape {shape}, but the "
                               f"{task} env gives ({expected},): it was trained on another task")
     normalizer = None

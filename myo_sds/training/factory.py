@@ -16,14 +16,15 @@ from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.sb3_internals import resize_rollout_buffer
 
 
-def env_factory(task: str, distribution: TaskKnobs, seed: int) -> Callable[[], Any]:
-    """A picklable-enough factory (for SubprocVecEnv) of one env, reset once with ``seed``."""
+def env_factory(task: str, distribution: TaskKnobs, seed: int, privileged: tuple[str, ...] = ()) -> Callable[[], Any]:
+    """A picklable-enough factory (for SubprocVecEnv) of one env, reset once with ``seed``; its
+    observation ends with the ``privileged`` features (``policy.critic_extra``)."""
     def build():
         if multiprocessing.current_process().name != "MainProcess":
             # Ctrl-C goes to the whole process group: let the main process save and stop
             # the workers, instead of the workers dying mid-step.
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-        env = TASK_SPECS[task].env_class()(distribution=distribution)
+        env = TASK_SPECS[task].env_class()(distribution=distribution, privileged=privileged)
         env.reset(seed=seed)
         return env
     return build
@@ -35,7 +36,7 @@ def build_vec_env(config: RunConfig, stage: Stage):
 
     from myo_sds.vec_env import ThreadVecEnv
 
-    factories = [env_factory(config.curriculum.task, stage.distribution, config.seed + rank)
+    factories = [env_factory(config.curriculum.task, stage.distribution, config.seed + rank, config.policy.critic_extra)
                  for rank in range(config.n_envs)]
     if config.vec_env == "subproc":
         venv = SubprocVecEnv(factories)
@@ -68,7 +69,8 @@ def build_statistics_venv(config: RunConfig, stage: Stage):
     merged statistics (the envs themselves run on the workers)."""
     from myo_sds.vec_env import StatisticsOnlyVecEnv
 
-    probe = TASK_SPECS[config.curriculum.task].env_class()(distribution=stage.distribution)
+    probe = TASK_SPECS[config.curriculum.task].env_class()(distribution=stage.distribution,
+                                                          privileged=config.policy.critic_extra)
     stand_in = StatisticsOnlyVecEnv(config.n_envs, probe.observation_space, probe.action_space)
     probe.close()
     return normalized(config, stand_in)
@@ -97,6 +99,8 @@ def build_model(config: RunConfig, venv, settings: PpoSettings):
     if policy.fast_lstm_update:
         policy_kwargs["action_mean_bound"] = policy.action_mean_bound
         policy_kwargs["action_head_lr_scale"] = policy.action_head_lr_scale
+    if policy.critic_extra:  # the actor reads the official observation, the first part of the env's
+        policy_kwargs["actor_observation_size"] = TASK_SPECS[config.curriculum.task].env_class().OBS_SIZE
     if lattice:
         policy_kwargs.update(lattice_alpha=policy.lattice_alpha, lattice_std_reg=policy.lattice_std_reg,
                              full_std=policy.lattice_full_std)
@@ -134,23 +138,32 @@ def trained_policy_files(source: Path) -> tuple[Path, Path]:
 def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
     """Fine-tuning: give a new ``model`` the weights and optimizer state of a trained policy,
     and its VecNormalize the policy's normalization moments (this run's normalization
-    settings stay)."""
+    settings stay). A policy trained without a privileged critic starts one with it: the critic's
+    weights on the extra inputs start at zero (the same value function), their statistics fresh."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
     from myo_sds.curricula.schema import ConfigError
     from myo_sds.published import load_statistics
 
-    data, _, _ = load_from_zip_file(str(model_file), load_data=True, device="cpu",
-                                    custom_objects={"lr_schedule": None, "clip_range": None})
+    data, params, _ = load_from_zip_file(str(model_file), load_data=True, device=model.device,
+                                         custom_objects={"lr_schedule": None, "clip_range": None})
+    actor_size = getattr(model.policy, "actor_observation_size", None)
+    widen = False
     for space in ("observation_space", "action_space"):
         trained, ours = data.get(space), getattr(model, space)
-        if trained is not None and trained.shape != ours.shape:
-            raise ConfigError(f"--init-from {model_file}: it was trained on {space.split('_')[0]}s of "
-                              f"{trained.shape[0]} values, this config's task has {ours.shape[0]} (a policy of "
-                              "another task cannot start this one)")
+        if trained is None or trained.shape == ours.shape:
+            continue
+        if space == "observation_space" and trained.shape[0] == actor_size:
+            widen = True  # the same task; this run's critic sees more
+            continue
+        raise ConfigError(f"--init-from {model_file}: it was trained on {space.split('_')[0]}s of "
+                          f"{trained.shape[0]} values, this config's task has {ours.shape[0]} (a policy of "
+                          "another task cannot start this one)")
     try:
         if _gaussian_into_lattice(model, model_file):
             _load_mean_network(model, model_file)
+        elif widen:
+            model.set_parameters(_widened(params, model), exact_match=True, device=model.device)
         else:
             model.set_parameters(str(model_file), exact_match=True, device=model.device)
     except (RuntimeError, ValueError, KeyError) as error:
@@ -159,10 +172,43 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
                           f"{_first_difference(error)}") from None
     if statistics.is_file():
         trained = load_statistics(statistics)
-        if trained.obs_rms.mean.shape != venv.obs_rms.mean.shape:
-            raise ConfigError(f"--init-from {statistics}: observations of shape {trained.obs_rms.mean.shape}, "
+        size = trained.obs_rms.mean.shape
+        if widen and size == (actor_size,):
+            venv.obs_rms.mean[:actor_size], venv.obs_rms.var[:actor_size] = trained.obs_rms.mean, trained.obs_rms.var
+            venv.obs_rms.count, venv.ret_rms = trained.obs_rms.count, trained.ret_rms
+            return
+        if size != venv.obs_rms.mean.shape:
+            raise ConfigError(f"--init-from {statistics}: observations of shape {size}, "
                               f"this task's are {venv.obs_rms.mean.shape}")
         venv.obs_rms, venv.ret_rms = trained.obs_rms, trained.ret_rms
+
+
+def _widened(params: dict, model) -> dict:
+    """A trained policy's parameters and optimizer state for ``model``, whose critic reads more
+    inputs: each tensor that is wider in ``model`` gets zero columns (weights and Adam moments
+    alike), so the critic computes what it did and starts learning the new inputs."""
+    import torch
+
+    ours = model.policy.state_dict()
+    weights = dict(params["policy"])
+    widened = {}
+    for index, (name, value) in enumerate(weights.items()):
+        target = ours[name]
+        if value.shape != target.shape:
+            if value.shape[:-1] != target.shape[:-1] or value.shape[-1] > target.shape[-1]:
+                raise RuntimeError(f"size mismatch for {name}: {tuple(value.shape)} in the checkpoint, "
+                                   f"{tuple(target.shape)} here")
+            widened[index] = target.shape[-1] - value.shape[-1]
+            weights[name] = torch.nn.functional.pad(value, (0, widened[index]))
+    optimizer = params["policy.optimizer"]
+    names = list(params["policy"])
+    parameter_index = {name: i for i, name in enumerate(n for n, _ in model.policy.named_parameters())}
+    for index, extra in widened.items():
+        slot = optimizer["state"].get(parameter_index.get(names[index]))
+        for key in ("exp_avg", "exp_avg_sq"):
+            if slot is not None and key in slot:
+                slot[key] = torch.nn.functional.pad(slot[key], (0, extra))
+    return {**params, "policy": weights, "policy.optimizer": optimizer}
 
 
 def _first_difference(error: Exception) -> str:

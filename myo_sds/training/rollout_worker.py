@@ -119,7 +119,8 @@ class RolloutWorker:
         self.config, self.index = config, index
         k = config.rollout.envs_per_worker or config.n_envs
         first = index * k
-        factories = [env_factory(config.curriculum.task, distribution, config.seed + first + rank) for rank in range(k)]
+        factories = [env_factory(config.curriculum.task, distribution, config.seed + first + rank,
+                                 config.policy.critic_extra) for rank in range(k)]
         self.venv = normalized(config, ThreadVecEnv(factories, min(config.env_threads or available_cpus(), k)))
         self.model = build_model(config, self.venv, settings)
         # The driver logs; without a logger of its own SB3 would make an empty /tmp/SB3-<date>
