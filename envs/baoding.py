@@ -175,9 +175,6 @@ class BaodingEnv(MuscleHandEnv):
             return "recorded"
         return "on_targets" if self._balls_placed else "rest"
 
-    def _episode_horizon(self) -> int:
-        return self.knobs.episode_steps or self.horizon
-
     def _goal_phase(self) -> float:
         return self._target_angle  # of the targets this step was solved against
 

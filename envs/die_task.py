@@ -15,7 +15,9 @@ from myo_sds.envs.knobs import (
     RecordedStart,
     TaskKnobs,
     check_complete,
+    count,
     goal_chain_setting,
+    optional,
     parse_range,
     ranged,
     recorded_start_setting,
@@ -109,6 +111,9 @@ class DieKnobs(TaskKnobs):
     goal_chain: GoalChain | None = goal_chain_setting(
         "the stage's goal_rotation; each new goal: the current orientation turned by a random rotation of "
         "U(offset) about each axis, at a new position drawn from goal_position")
+    episode_steps: int | None = setting(None, parse=optional(count()),
+                                        help="control steps per episode: null (the official 150) or a count, e.g. 64 "
+                                             "for PKU-MARL's first stage; the score rule stays")
     rotation_kernel_width: float = setting(0.2, parse=scalar(positive=True),
                                            help="rad^2, w of the rot_kernel reward term w / (d^2 + w)")
     position_threshold: float = setting(0.025, parse=scalar(positive=True),

@@ -186,8 +186,9 @@ class MuscleHandEnv(gym.Env):
         return "recorded" if self.recorded_start else None
 
     def _episode_horizon(self) -> int:
-        """Control steps before truncation this episode (a knob may lengthen the constructor's)."""
-        return self.horizon
+        """Control steps before truncation this episode: the task's ``episode_steps`` knob, if it
+        has one and it is set, else the constructor's horizon."""
+        return getattr(self.knobs, "episode_steps", None) or self.horizon
 
     def _goal_phase(self) -> float | None:
         """Where on its path the goal is at this step (rad), for reports by goal phase."""

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 EPISODE_COLUMNS = ("step", "wall_s", "stage_index", "stage", "score", "solved_steps", "length", "dropped",
-                   "effort", "direction", "start_phase", "reward", "start")
+                   "effort", "direction", "start_phase", "reward", "start", "goals")
 
 
 @dataclass(frozen=True)
@@ -33,13 +33,14 @@ class EpisodeRecord:
     start_phase: float | None  # rad; None in runs begun before it was logged
     reward: float | None = None  # the episode's return under the stage's reward weights
     start: str | None = None  # on_targets | rest | recorded (EpisodeResult.start)
+    goals: int | None = None  # goals reached, with chained goals (EpisodeResult.goals_reached)
 
     def to_row(self) -> tuple:
         phase = "" if self.start_phase is None else f"{self.start_phase:.4f}"
         reward = "" if self.reward is None else f"{self.reward:.6g}"
         return (self.step, f"{self.wall_s:.2f}", self.stage_index, self.stage, f"{self.score:.6g}", self.solved_steps,
                 self.length, int(self.dropped), f"{self.effort:.6g}", self.direction or "", phase, reward,
-                self.start or "")
+                self.start or "", "" if self.goals is None else self.goals)
 
     @classmethod
     def from_row(cls, row: dict[str, str]) -> EpisodeRecord:
@@ -47,7 +48,7 @@ class EpisodeRecord:
         return cls(int(row["step"]), float(row["wall_s"]), int(row["stage_index"]), row["stage"], float(row["score"]),
                    int(row["solved_steps"]), int(row["length"]), row["dropped"] == "1", float(row["effort"]),
                    row["direction"], float(phase) if phase else None, float(reward) if reward else None,
-                   row.get("start") or None)
+                   row.get("start") or None, int(row["goals"]) if row.get("goals") else None)
 
 
 

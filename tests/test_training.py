@@ -214,7 +214,7 @@ def test_a_run_that_spent_its_budget_resumes_with_a_larger_one(tmp_path):
     # Each episode's start phase is logged (random phases here), its return and how it began.
     episodes_file = RunFolder(run).episodes_file
     header, *rows = [line.split(",") for line in episodes_file.read_text().splitlines()]
-    assert header[-3:] == ["start_phase", "reward", "start"]
+    assert header[-4:] == ["start_phase", "reward", "start", "goals"]
     phase = header.index("start_phase")
     assert len({row[phase] for row in rows}) > 1 and all(0 <= float(row[phase]) < 6.2832 for row in rows)
     # A run begun by an older version logged no start phases: its rows keep matching its header.

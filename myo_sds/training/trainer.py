@@ -355,7 +355,7 @@ class CurriculumTrainer:
                      window, rule.tracked_gain if rule else None)
         self.folder.append_episodes(
             EpisodeRecord(step, wall_s, state.stage_index, self.stage.name, r.score, r.solved_steps, r.length,
-                          r.dropped, r.effort, r.direction, r.start_phase, r.reward, r.start)
+                          r.dropped, r.effort, r.direction, r.start_phase, r.reward, r.start, r.goals_reached)
             for step, wall_s, r in results)
         logger = model.logger
         for key, value in episode_callback.pop_term_means().items():
