@@ -83,6 +83,9 @@ class RunSettings:
     total_steps: int = setting(1_000_000, parse=integer(low=1), help="env steps of the whole run")
     checkpoint_every: int = setting(50_000, parse=integer(low=1), help="env steps between checkpoints")
     keep_checkpoints: int = setting(3, parse=integer(low=1), help="newest checkpoints kept")
+    init_from: Path | None = setting(None, parse=optional(lambda name, value: Path(text(name, value))),
+                                     help="a trained policy to start from (model or run folder, or a checkpoint "
+                                          ".zip; relative to the file that names it): fine-tuning, as --init-from")
     output_dir: Path = setting(Path("runs"), parse=lambda name, value: Path(text(name, value)),
                                help="where new run folders are made")
 

@@ -156,6 +156,7 @@ class RunConfig:
     device: str = RunSettings.device
     num_threads: int = RunSettings.num_threads
     total_steps: int = RunSettings.total_steps
+    init_from: Path | None = RunSettings.init_from
     checkpoint_every: int = RunSettings.checkpoint_every
     keep_checkpoints: int = RunSettings.keep_checkpoints
     output_dir: Path = RunSettings.output_dir
@@ -325,6 +326,8 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     sections = ("curriculum", "policy", "ppo", "normalize", "rollout")
     top = read_settings(reader, "", {k: v for k, v in raw.items() if k not in sections}, RunSettings)
     values: dict[str, Any] = {f.name: getattr(top, f.name) for f in fields(RunSettings)}
+    if values["init_from"] is not None and not values["init_from"].is_absolute():
+        values["init_from"] = (path.parent / values["init_from"]).resolve()
     values["policy"] = read_settings(reader, "policy", raw.get("policy"), PolicyConfig)
     for key, default in (("action_mean_bound", 0.0), ("action_head_lr_scale", 1.0), ("exploration", "gaussian")):
         if getattr(values["policy"], key) != default and not values["policy"].fast_lstm_update:

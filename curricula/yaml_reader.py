@@ -150,6 +150,7 @@ def _deep_merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, A
     return merged
 
 
+PATH_KEYS = ("curriculum", "init_from")  # run-config values that are paths
 PLACEMENT = ("after", "before")  # where a stage added by name goes (a curriculum's stage mapping)
 
 
@@ -219,8 +220,9 @@ def merge_bases(path: Path, what: str, _seen: tuple[Path, ...] = ()) -> tuple[di
     if not isinstance(raw, Mapping):
         raise ConfigError(f"{path}: expected a mapping of settings, got {type(raw).__name__}")
     raw = dict(raw)
-    if "curriculum" in raw and isinstance(raw["curriculum"], str) and not Path(raw["curriculum"]).is_absolute():
-        raw["curriculum"] = str((path.parent / raw["curriculum"]).resolve()) if _seen else raw["curriculum"]
+    for key in PATH_KEYS:  # a relative path stays relative to the file that wrote it
+        if isinstance(raw.get(key), str) and not Path(raw[key]).is_absolute():
+            raw[key] = str((path.parent / raw[key]).resolve()) if _seen else raw[key]
     base = raw.pop("base", None)
     if base is None:
         return raw, {}

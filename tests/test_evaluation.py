@@ -336,8 +336,8 @@ def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, cap
 @pytest.mark.parametrize("curriculum, task", [("baoding_p1_2022", "p1_2022"), ("baoding_p1", "p1"),
                                               ("quickstart", "p1")])
 def test_the_model_card_evaluates_on_the_task_the_curriculum_ends_on(tiny_run, tmp_path, curriculum, task):
-    """Its last stage's preset whatever its rewards (p1_2022's with the winner's; p1 as it is); a
-    curriculum that ends on no preset (quickstart: a 20 s orbit) falls back to p1."""
+    """Its last stage's preset whatever its rewards and knobs (p1_2022's with the winner's; p1 as it is;
+    quickstart: p1 with start noise)."""
     from myo_sds.evaluation.model_card import model_card
 
     model = tmp_path / "model"

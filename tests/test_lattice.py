@@ -177,14 +177,25 @@ def test_log_probability_entropy_and_their_gradients_equal_torch_s_multivariate_
 
 
 def test_an_update_that_makes_the_policy_non_finite_stops_the_run_with_the_policy_from_before(tmp_path):
-    """Lattice on the quickstart config: the first update overflows a probability ratio (its noise
-    is small at log_std_init -1). The run stops with a clear reason and a finite, resumable-looking
-    checkpoint instead of a Cholesky traceback; the noise floor the message names trains through."""
+    """Lattice on a small from-scratch setup (64-unit LSTM, lr 3e-4, log_std_init -1, the first
+    quickstart's): the first update overflows a probability ratio (the noise is small). The run
+    stops with a clear reason and a finite checkpoint instead of a Cholesky traceback; the noise
+    floor the message names trains through."""
     from myo_sds.curricula.state import RunStatus
     from myo_sds.run_folder import RunFolder
     from myo_sds.training import CurriculumTrainer
 
-    config = REPO / "configs" / "quickstart.yaml"
+    (tmp_path / "curriculum.yaml").write_text(
+        "name: hold\ntask: baoding\n"
+        "defaults: {preset: p1, direction: hold, period: static, start_angle: uniform, rsi_probability: 1.0,\n"
+        "           reward_weights: {pos_dist_1: 1.0, pos_dist_2: 1.0, solved: 5.0, alive: 1.0}}\n"
+        "stages:\n  - name: hold-wide\n    env: {solved_radius: 0.03}\n"
+        "    advance: {metric: score, threshold: 0.08, window: 40, max_steps: 400000}\n")
+    config = tmp_path / "small.yaml"
+    config.write_text("curriculum: curriculum.yaml\nseed: 0\nn_envs: 4\n"
+                      "policy: {lstm_hidden_size: 64, net_arch: [64, 64], log_std_init: -1.0}\n"
+                      "ppo: {learning_rate: 3.0e-4, n_steps: 256, batch_size: 256, n_epochs: 4, clip_range: 0.2, "
+                      "ent_coef: 0.0}\n")
     trainer = CurriculumTrainer.start(config, ("policy.exploration=lattice", "total_steps=3072"),
                                       run_dir=tmp_path / "bad", progress=False)
     state = trainer.run()

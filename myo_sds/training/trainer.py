@@ -157,6 +157,7 @@ class CurriculumTrainer:
 
         config_path = Path(config_path)
         config = load_run_config(config_path, overrides)
+        init_from = init_from if init_from is not None else config.init_from
         trained = trained_policy_files(init_from) if init_from is not None else None
         if run_dir is None:
             folder = RunFolder.create(config.output_dir, config_path.stem, config.seed)
@@ -166,6 +167,8 @@ class CurriculumTrainer:
         try:
             # The run folder is self-contained: its config points at its own copy of the curriculum.
             resolved = {**config.source, "curriculum": folder.curriculum_file.name, "seed": config.seed}
+            if init_from is not None:  # where the run's first policy came from (a resume never reads it)
+                resolved["init_from"] = str(Path(init_from).resolve())
             folder.write_provenance(yaml.safe_dump(resolved, sort_keys=False), config.curriculum.file_text())
             set_random_seed(config.seed)
             state = CurriculumState()
