@@ -75,6 +75,12 @@ class SequenceLstmPolicy(RecurrentActorCriticPolicy):
                           episode_starts: th.Tensor, lstm: th.nn.LSTM) -> tuple[th.Tensor, th.Tensor]:
         if features.shape[-1] != lstm.input_size:  # the actor of a privileged critic: the official part
             features = features[..., :lstm.input_size]
+        return self.sequence_pass(features, lstm_states, episode_starts, lstm)
+
+    @staticmethod
+    def sequence_pass(features: th.Tensor, lstm_states: tuple[th.Tensor, th.Tensor],
+                      episode_starts: th.Tensor, lstm: th.nn.LSTM) -> tuple[th.Tensor, th.Tensor]:
+        """sb3-contrib's ``_process_sequence``, over the whole sequence at once where it can."""
         n_seq = lstm_states[0].shape[1]
         starts = episode_starts.reshape((n_seq, -1)).swapaxes(0, 1)  # (length, n_seq)
         if not th.all(starts[1:] == 0.0):

@@ -330,7 +330,7 @@ def test_an_exported_model_folder_evaluates_like_its_run(tiny_run, tmp_path, cap
         assert f"| {s.index} {s.name} | {s.status} | {s.env_steps:,} | {s.wall_s / 3600:.2f} |" in card
     assert (tiny_run.path / "command.txt").read_text().strip() in card
     assert main(["--export", str(tmp_path / "nothing"), "--to", str(tmp_path / "x")]) == 2
-    assert "not a run folder" in capsys.readouterr().err
+    assert "nothing: no such file or folder" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("curriculum, task", [("baoding_p1_2022", "p1_2022"), ("baoding_p1", "p1"),

@@ -65,3 +65,16 @@ def test_the_model_card_of_a_fine_tuned_run_names_the_policy_it_started_from(tin
     assert main(["--export", str(tmp_path / "tuned"), "--to", str(tmp_path / "tuned_model")]) == 0
     card = (tmp_path / "tuned_model" / "README.md").read_text()
     assert f"it started from `{tmp_path / 'model'}` (`--init-from`" in card
+
+
+def test_init_from_a_policy_of_another_task_names_the_observation_size(tmp_path):
+    """The shipped die policy into a Baoding config: the cause is the task (102 observations, not
+    86), not the network settings."""
+    from pathlib import Path
+
+    die_policy = Path(__file__).resolve().parents[1] / "models" / "die_p1"
+    with pytest.raises(ConfigError, match="trained on observations of 102 values, this config's task has 86 "
+                                          "\\(a policy of another task cannot start this one\\)"):
+        CurriculumTrainer.start(write_config(tmp_path, total=256), run_dir=tmp_path / "run", progress=False,
+                                init_from=die_policy)
+    assert not (tmp_path / "run").exists()

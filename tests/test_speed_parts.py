@@ -27,7 +27,7 @@ def test_sequence_fast_path_matches_step_by_step(starts_inside):
     if starts_inside:
         starts[1, 4] = 1.0  # a reset mid-sequence: the fallback loop must handle it
     stock_out, stock_states = RecurrentActorCriticPolicy._process_sequence(features, states, starts.flatten(), lstm)
-    fast_out, fast_states = SequenceLstmPolicy._process_sequence(features, states, starts.flatten(), lstm)
+    fast_out, fast_states = SequenceLstmPolicy.sequence_pass(features, states, starts.flatten(), lstm)
     th.testing.assert_close(fast_out, stock_out, rtol=1e-5, atol=1e-6)
     th.testing.assert_close(fast_states[0], stock_states[0], rtol=1e-5, atol=1e-6)
     th.testing.assert_close(fast_states[1], stock_states[1], rtol=1e-5, atol=1e-6)

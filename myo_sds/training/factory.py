@@ -145,20 +145,22 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
     from myo_sds.curricula.schema import ConfigError
     from myo_sds.published import load_statistics
 
-    data, params, _ = load_from_zip_file(str(model_file), load_data=True, device=model.device,
-                                         custom_objects={"lr_schedule": None, "clip_range": None})
+    # The sizes its networks take and give (read from the weights: archives of other library
+    # versions, the 2022 ones under gym included, keep them where their pickled spaces may not load).
+    _, params, _ = load_from_zip_file(str(model_file), load_data=False, device=model.device)
+    weights = params.get("policy", {})
+    sizes = {"observation": _input_size(weights), "action": _output_size(weights)}
+    ours = {"observation": model.observation_space.shape[0], "action": model.action_space.shape[0]}
     actor_size = getattr(model.policy, "actor_observation_size", None)
     widen = False
-    for space in ("observation_space", "action_space"):
-        trained, ours = data.get(space), getattr(model, space)
-        if trained is None or trained.shape == ours.shape:
+    for kind, trained in sizes.items():
+        if trained is None or trained == ours[kind]:
             continue
-        if space == "observation_space" and trained.shape[0] == actor_size:
+        if kind == "observation" and trained == actor_size:
             widen = True  # the same task; this run's critic sees more
             continue
-        raise ConfigError(f"--init-from {model_file}: it was trained on {space.split('_')[0]}s of "
-                          f"{trained.shape[0]} values, this config's task has {ours.shape[0]} (a policy of "
-                          "another task cannot start this one)")
+        raise ConfigError(f"--init-from {model_file}: it was trained on {kind}s of {trained} values, this "
+                          f"config's task has {ours[kind]} (a policy of another task cannot start this one)")
     try:
         if _gaussian_into_lattice(model, model_file):
             _load_mean_network(model, model_file)
@@ -181,6 +183,18 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
             raise ConfigError(f"--init-from {statistics}: observations of shape {size}, "
                               f"this task's are {venv.obs_rms.mean.shape}")
         venv.obs_rms, venv.ret_rms = trained.obs_rms, trained.ret_rms
+
+
+def _input_size(weights: dict) -> int | None:
+    """The observation size a policy's weights read (its critic's LSTM reads all of it)."""
+    for name in ("lstm_critic.weight_ih_l0", "lstm_actor.weight_ih_l0"):
+        if name in weights:
+            return int(weights[name].shape[1])
+    return None
+
+
+def _output_size(weights: dict) -> int | None:
+    return int(weights["action_net.weight"].shape[0]) if "action_net.weight" in weights else None
 
 
 def _widened(params: dict, model) -> dict:
