@@ -572,3 +572,14 @@ def test_a_privileged_critic_sees_more_than_the_actor_and_the_policy_runs_on_the
                          ("policy.critic_extra=[physics, physics]", "listed twice")):
         with pytest.raises(ConfigError, match=message):
             CurriculumTrainer.start(tmp_path / "run.yaml", (bad,), run_dir=tmp_path / "bad", progress=False)
+
+
+def test_resume_of_a_folder_that_is_no_run_says_so(tmp_path, capsys):
+    from myo_sds.cli.train import main
+
+    (tmp_path / "empty").mkdir()
+    assert main(["--resume", str(tmp_path / "empty")]) == 2
+    assert capsys.readouterr().err == (f"error: {tmp_path / 'empty'}: not a run folder (no config.yaml with "
+                                       "checkpoints/ or final_model.zip inside)\n")
+    assert main(["--resume", str(tmp_path / "gone")]) == 2
+    assert capsys.readouterr().err == f"error: {tmp_path / 'gone'}: no such file or folder\n"
