@@ -18,6 +18,7 @@ import numpy as np
 from myo_sds.envs.assets import load_hand_model
 from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs, check_known
 from myo_sds.envs.metrics import PHASE_SECTORS, EpisodeResult, phase_sector
+from myo_sds.envs.state_bank import StateBank
 
 _INSTABILITY_WARNINGS = np.array([mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
                                   mujoco.mjtWarning.mjWARN_BADQACC], dtype=int)
@@ -40,35 +41,6 @@ def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Rend
             f"offscreen rendering needs an OpenGL backend ({error}). On Debian/Ubuntu install "
             "EGL with `apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri` and set MUJOCO_GL=egl "
             "(the default here), or `apt-get install libosmesa6` and set MUJOCO_GL=osmesa.") from None
-
-
-class StateBank:
-    """A bounded reservoir of simulator states (``qpos``, ``qvel``, ``act``): every state offered
-    is equally likely to be in it, whatever the number offered (Vitter's algorithm R)."""
-
-    def __init__(self, capacity: int, model: mujoco.MjModel) -> None:
-        self.capacity = capacity
-        self.qpos = np.zeros((capacity, model.nq))
-        self.qvel = np.zeros((capacity, model.nv))
-        self.act = np.zeros((capacity, model.na))
-        self.size = 0
-        self.offered = 0
-
-    def offer(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
-        """Keep ``data``'s state: in a free slot, else in place of a random kept one with
-        probability capacity / offered (one draw from ``rng`` once the bank is full)."""
-        self.offered += 1
-        if self.size < self.capacity:
-            slot = self.size
-            self.size += 1
-        else:
-            slot = int(rng.integers(self.offered))
-            if slot >= self.capacity:
-                return
-        self.qpos[slot], self.qvel[slot], self.act[slot] = data.qpos, data.qvel, data.act
-
-    def restore(self, slot: int, data: mujoco.MjData) -> None:
-        data.qpos[:], data.qvel[:], data.act[:] = self.qpos[slot], self.qvel[slot], self.act[slot]
 
 
 class MuscleHandEnv(gym.Env):

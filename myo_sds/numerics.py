@@ -77,3 +77,17 @@ def describe() -> dict[str, Any]:
     """What an evaluation records of the machine's numerics."""
     return {"fingerprint": fingerprint(), "cpu": cpu_name(),
             "pins": {name: os.environ.get(name, "") for name in KERNEL_PINS}}
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of Python, the platform and the libraries a run depends on (its ``versions.json``)."""
+    import platform
+    from importlib import metadata
+
+    versions = {"python": platform.python_version(), "platform": platform.platform()}
+    for name in ("mujoco", "gymnasium", "stable-baselines3", "sb3-contrib", "torch", "numpy", "myosuite"):
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions

@@ -26,14 +26,15 @@ from __future__ import annotations
 import json
 import os
 import pickle
-import platform
 import sys
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from myo_sds import numerics
+from myo_sds.checkpoint_files import CheckpointFiles, checkpoint_files, statistics_beside
 from myo_sds.curricula.state import CurriculumState
 from myo_sds.episode_log import (
     EPISODE_COLUMNS,
@@ -61,45 +62,6 @@ FINAL_VECNORMALIZE = "final_vecnormalize.pkl"
 COMMAND_FILE = "command.txt"
 VERSIONS_FILE = "versions.json"
 MODEL_CARD = "README.md"
-@dataclass(frozen=True)
-class CheckpointFiles:
-    """A checkpoint's files. The random state is optional: checkpoints written before it
-    existed resume with streams seeded from the run's seed and step count."""
-
-    steps: int
-    model: Path
-    vecnormalize: Path
-    state: Path
-    random_state: Path
-
-    def __iter__(self):
-        return iter((self.model, self.vecnormalize, self.state, self.random_state))
-
-    def complete(self) -> bool:
-        return all(path.is_file() for path in (self.model, self.vecnormalize, self.state))
-
-    def read_state(self) -> CurriculumState:
-        return CurriculumState.from_json(self.state.read_text())
-
-    def read_random_state(self) -> dict[str, Any] | None:
-        return pickle.loads(self.random_state.read_bytes()) if self.random_state.is_file() else None
-
-
-def checkpoint_files(folder: Path, steps: int) -> CheckpointFiles:
-    """SB3's names for a checkpoint's model and statistics, plus our curriculum state and the
-    random generators' states."""
-    return CheckpointFiles(steps, folder / f"rl_model_{steps}_steps.zip",
-                           folder / f"rl_model_vecnormalize_{steps}_steps.pkl",
-                           folder / f"curriculum_state_{steps}_steps.json",
-                           folder / f"random_state_{steps}_steps.pkl")
-
-
-def statistics_beside(model: Path) -> Path:
-    """The normalization statistics saved beside a model file, under SB3's names."""
-    name = model.name
-    if name.startswith("rl_model_") and name.endswith("_steps.zip"):
-        return model.with_name(name.replace("rl_model_", "rl_model_vecnormalize_").replace(".zip", ".pkl"))
-    return model.with_name(name.replace("model", "vecnormalize").replace(".zip", ".pkl"))
 
 
 def atomic_write_text(path: Path, text: str) -> None:
@@ -113,18 +75,6 @@ def _atomic_save(path: Path, save) -> None:
     tmp = path.with_name(f".tmp_{path.name}")
     save(tmp)
     os.replace(tmp, path)
-
-
-def package_versions() -> dict[str, str]:
-    from importlib import metadata
-
-    versions = {"python": platform.python_version(), "platform": platform.platform()}
-    for name in ("mujoco", "gymnasium", "stable-baselines3", "sb3-contrib", "torch", "numpy", "myosuite"):
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            versions[name] = "not installed"
-    return versions
 
 
 class _InRun:
@@ -204,7 +154,7 @@ class RunFolder:
         (self.path / CONFIG_FILE).write_text(config_yaml)
         self.command_file.unlink(missing_ok=True)
         self.record_session(0)
-        self.versions_file.write_text(json.dumps(package_versions(), indent=2))
+        self.versions_file.write_text(json.dumps(numerics.package_versions(), indent=2))
 
     def record_session(self, from_step: int) -> None:
         """Append this session's command line to ``command.txt``, after a comment line with

@@ -127,3 +127,9 @@ def test_importing_any_module_sets_no_environment_variable():
     out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, cwd="/",
                          check=True).stdout
     assert json.loads(out.splitlines()[-1]) == {}
+
+
+def test_no_product_module_is_over_400_lines():
+    """Small modules a reader takes in at once (stable-baselines3's are the model)."""
+    long = {name: n for name, path in modules().items() if (n := len(path.read_text().splitlines())) > 400}
+    assert long == {}

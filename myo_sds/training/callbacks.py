@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from myo_sds.envs.metrics import EpisodeResult
@@ -123,3 +125,42 @@ class EpisodeCollector(BaseCallback):
 
 
 # -- the run -----------------------------------------------------------------------------
+
+
+def log_rest_starts(logger, episodes) -> None:
+    """The rest-start signal: of a rollout's episodes that began with the balls where the hand
+    holds them (not placed on their targets), how many and their mean solved steps, by direction.
+    Rotation stages with ``rsi_probability`` < 1 have some; picking moving targets up from rest is
+    what the fixed-start stages then ask for."""
+    by_direction: dict[str, list[int]] = {}
+    for r in episodes:
+        if r.start == "rest":
+            by_direction.setdefault(r.direction or "all", []).append(r.solved_steps)
+    for direction, solved in by_direction.items():
+        logger.record(f"rest_start/{direction}_episodes", len(solved))
+        logger.record(f"rest_start/{direction}_solved_steps", float(np.mean(solved)))
+
+
+@dataclass
+class RolloutTiming:
+    steps: int
+    wall_s: float
+    env_s: float
+    update_s: float
+
+
+def log_rollout(logger, episodes, timing: RolloutTiming | None, policy) -> None:
+    """A rollout's episodes (score, effort, drops, the rest-start signal), its timing and the
+    policy's action noise, into TensorBoard."""
+    if episodes:
+        logger.record("rollout/score", float(np.mean([r.score for r in episodes])))
+        logger.record("rollout/effort", float(np.mean([r.effort for r in episodes])))
+        logger.record("rollout/drop_rate", float(np.mean([r.dropped for r in episodes])))
+        log_rest_starts(logger, episodes)
+    if timing and timing.wall_s > 0:
+        logger.record("time/env_steps_per_s", timing.steps / timing.wall_s)
+        logger.record("time/env_stepping_share", timing.env_s / timing.wall_s)
+        logger.record("time/update_share", timing.update_s / timing.wall_s)
+    std = policy.log_std.detach().exp()
+    logger.record("policy/action_std_mean", float(std.mean()))  # SB3 logs the mean as train/std
+    logger.record("policy/action_std_min", float(std.min()))

@@ -12,10 +12,8 @@ from __future__ import annotations
 import math
 import signal
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from myo_sds.curricula.advancement import (
@@ -37,7 +35,8 @@ from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.run_folder import EpisodeRecord, RunFolder
 from myo_sds.sb3_internals import set_last_observation, start_training, tensorboard_output, updates_done
 from myo_sds.threads import UpdateThreads, available_cpus
-from myo_sds.training.callbacks import EpisodeCollector, UpdateInterrupted
+from myo_sds.training.callbacks import EpisodeCollector, RolloutTiming, UpdateInterrupted, log_rollout
+from myo_sds.training.divergence import UpdateDiverged, finite, restore_training_state, training_state
 from myo_sds.training.factory import (
     apply_ppo_settings,
     build_model,
@@ -50,50 +49,6 @@ from myo_sds.training.rollout import LocalRollouts, RolloutCollector, WorkerLost
 from myo_sds.training.stage_evaluation import StageEvaluator
 
 RESUMABLE = (RunStatus.RUNNING, RunStatus.INTERRUPTED, RunStatus.TIME_LIMIT)
-
-
-@dataclass
-class RolloutTiming:
-    steps: int
-    wall_s: float
-    env_s: float
-    update_s: float
-
-
-class UpdateDiverged(RuntimeError):
-    """A PPO update left non-finite parameters (the model is restored to before it)."""
-
-
-def _finite(model) -> bool:
-    return all(bool(p.isfinite().all()) for p in model.policy.parameters())
-
-
-def _training_state(model) -> tuple[dict, dict]:
-    """Copies of the policy's weights and the optimizer's state, to undo an update."""
-    import copy
-
-    return ({k: v.detach().clone() for k, v in model.policy.state_dict().items()},
-            copy.deepcopy(model.policy.optimizer.state_dict()))
-
-
-def _restore_training_state(model, saved: tuple[dict, dict]) -> None:
-    weights, optimizer = saved
-    model.policy.load_state_dict(weights)
-    model.policy.optimizer.load_state_dict(optimizer)
-
-
-def _log_rest_starts(logger, episodes) -> None:
-    """The rest-start signal: of a rollout's episodes that began with the balls where the hand
-    holds them (not placed on their targets), how many and their mean solved steps, by direction.
-    Rotation stages with ``rsi_probability`` < 1 have some; picking moving targets up from rest is
-    what the fixed-start stages then ask for."""
-    by_direction: dict[str, list[int]] = {}
-    for r in episodes:
-        if r.start == "rest":
-            by_direction.setdefault(r.direction or "all", []).append(r.solved_steps)
-    for direction, solved in by_direction.items():
-        logger.record(f"rest_start/{direction}_episodes", len(solved))
-        logger.record(f"rest_start/{direction}_solved_steps", float(np.mean(solved)))
 
 
 def _rollouts(config: RunConfig, model, stage: Stage, settings) -> RolloutCollector:
@@ -311,16 +266,16 @@ class CurriculumTrainer:
         updated_at = time.perf_counter()
         if complete:
             epochs_before = updates_done(model)
-            before = _training_state(model)
+            before = training_state(model)
             try:
                 model.train()
             except UpdateInterrupted:
                 pass  # stopped between minibatches: weights and optimizer are consistent
             except RuntimeError:  # e.g. Lattice's Cholesky factor of a covariance made of NaNs
-                if _finite(model):
+                if finite(model):
                     raise
-            if not _finite(model):
-                _restore_training_state(model, before)
+            if not finite(model):
+                restore_training_state(model, before)
                 raise UpdateDiverged(
                     f"the PPO update at env step {model.num_timesteps:,} made the policy's parameters non-finite "
                     "(a probability ratio overflowed); the run stops with the policy from before it. "
@@ -363,21 +318,8 @@ class CurriculumTrainer:
         logger = model.logger
         for key, value in episode_callback.pop_term_means().items():
             logger.record(f"reward/{key}", value)
-        if results:
-            episodes = [r for _, _, r in results]
-            logger.record("rollout/score", float(np.mean([r.score for r in episodes])))
-            logger.record("rollout/effort", float(np.mean([r.effort for r in episodes])))
-            logger.record("rollout/drop_rate", float(np.mean([r.dropped for r in episodes])))
-            _log_rest_starts(logger, episodes)
-        timing = self.timings[-1] if self.timings else None
-        if timing and timing.wall_s > 0:
-            logger.record("time/env_steps_per_s", timing.steps / timing.wall_s)
-            logger.record("time/env_stepping_share", timing.env_s / timing.wall_s)
-            logger.record("time/update_share", timing.update_s / timing.wall_s)
+        log_rollout(logger, [r for _, _, r in results], self.timings[-1] if self.timings else None, model.policy)
         logger.record("time/update_threads", self.update_threads.current)
-        std = model.policy.log_std.detach().exp()
-        logger.record("policy/action_std_mean", float(std.mean()))  # SB3 logs the mean as train/std
-        logger.record("policy/action_std_min", float(std.min()))
         if self.config.rollout.backend != "local":
             logger.record("rollout/worker_restarts", self.rollouts.restarts)
         logger.record("curriculum/stage_index", state.stage_index)
