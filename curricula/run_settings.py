@@ -92,6 +92,8 @@ class RunSettings:
 
 @dataclass(frozen=True)
 class PolicyConfig:
+    """The policy network and its exploration."""
+
     lstm_hidden_size: int = setting(256, parse=integer(low=1), help="units of each LSTM")
     enable_critic_lstm: bool = setting(True, parse=boolean, help="a separate LSTM for the critic")
     net_arch: tuple[int, ...] = setting((256, 256), parse=layers, help="layers after each LSTM ([]: none)")
@@ -120,6 +122,18 @@ class PolicyConfig:
         (), parse=lambda name, value: names(name, value),
         help="privileged features only the critic sees in training, by name (the task's: e.g. die_velocity, "
              "fingertips, physics); the actor, exported policies and evaluate.py see the official observation")
+
+    def __post_init__(self) -> None:  # rules between the fields (parse_settings names the key)
+        fast_only = {"action_mean_bound": 0.0, "action_head_lr_scale": 1.0, "exploration": "gaussian",
+                     "critic_extra": ()}
+        for key, default in fast_only.items():
+            if getattr(self, key) != default and not self.fast_lstm_update:
+                raise ValueError(f"{key}: needs policy.fast_lstm_update: true (it lives in the fast policy class)")
+        if self.exploration == "lattice":
+            for key in ("action_mean_bound", "action_head_lr_scale"):
+                if getattr(self, key) != fast_only[key]:
+                    raise ValueError(f"{key}: applies to the Gaussian policy's mean only; with exploration: lattice "
+                                     "leave it at its default")
 
 
 @dataclass(frozen=True)

@@ -323,43 +323,42 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
         curriculum_path = (path.parent / curriculum_path).resolve()
     if not curriculum_path.is_file():
         raise reader.error("curriculum", f"curriculum file not found: {curriculum_path}")
-    sections = ("curriculum", "policy", "ppo", "normalize", "rollout")
-    top = read_settings(reader, "", {k: v for k, v in raw.items() if k not in sections}, RunSettings)
-    values: dict[str, Any] = {f.name: getattr(top, f.name) for f in fields(RunSettings)}
-    if values["init_from"] is not None and not values["init_from"].is_absolute():
-        values["init_from"] = (path.parent / values["init_from"]).resolve()
-    values["policy"] = read_settings(reader, "policy", raw.get("policy"), PolicyConfig)
-    for key, default in (("action_mean_bound", 0.0), ("action_head_lr_scale", 1.0), ("exploration", "gaussian")):
-        if getattr(values["policy"], key) != default and not values["policy"].fast_lstm_update:
-            raise reader.error(f"policy.{key}", "needs policy.fast_lstm_update: true "
-                               "(it lives in the fast policy class)")
-    if values["policy"].exploration == "lattice":
-        for key, default in (("action_mean_bound", 0.0), ("action_head_lr_scale", 1.0)):
-            if getattr(values["policy"], key) != default:
-                raise reader.error(f"policy.{key}", "applies to the Gaussian policy's mean only; "
-                                   "with exploration: lattice leave it at its default")
-    values["ppo"] = read_settings(reader, "ppo", raw.get("ppo"), PpoConfig)
-    values["normalize"] = read_settings(reader, "normalize", raw.get("normalize"), NormalizeConfig)
-    values["rollout"] = read_settings(reader, "rollout", raw.get("rollout"), RolloutConfig)
-    if values["rollout"].backend == "ray":
-        rollout_config = values["rollout"]
-        n_envs = values["n_envs"]
-        per_worker = rollout_config.envs_per_worker or n_envs // rollout_config.workers
-        if per_worker < 1:
-            raise reader.error("rollout.envs_per_worker", f"must be >= 1 (n_envs {n_envs} over "
-                               f"{rollout_config.workers} workers gives {per_worker})")
-        values["rollout"] = RolloutConfig(**{**rollout_config.__dict__, "envs_per_worker": per_worker})
-        values["n_envs"] = rollout_config.workers * per_worker
+    values = _run_settings(reader, raw, path)
     curriculum = load_curriculum(curriculum_path, curriculum_overrides)
     privileged = TASK_SPECS[curriculum.task].privileged
     for name in values["policy"].critic_extra:
         if name not in privileged:
             raise reader.error("policy.critic_extra", f"{name!r} is not a privileged feature of the {curriculum.task} "
                                f"task; allowed: {', '.join(privileged)}")
-    if values["policy"].critic_extra and not values["policy"].fast_lstm_update:
-        raise reader.error("policy.critic_extra", "needs policy.fast_lstm_update: true (it lives in the fast policy class)")
     origins = {dotted: reader.origin(dotted) for dotted in _flat_keys(raw)}
     config = RunConfig(curriculum=curriculum, curriculum_path=curriculum_path, source=raw, origins=origins, **values)
+    _check_batch_sizes(reader, config, path)
+    return config
+
+
+def _run_settings(reader: YamlReader, raw: Mapping[str, Any], path: Path) -> dict[str, Any]:
+    """The top level and each section, read through their declarations; paths made absolute
+    and a Ray run's env count made whole."""
+    sections = {"policy": PolicyConfig, "ppo": PpoConfig, "normalize": NormalizeConfig, "rollout": RolloutConfig}
+    top = read_settings(reader, "", {k: v for k, v in raw.items() if k not in (*sections, "curriculum")}, RunSettings)
+    values: dict[str, Any] = {f.name: getattr(top, f.name) for f in fields(RunSettings)}
+    if values["init_from"] is not None and not values["init_from"].is_absolute():
+        values["init_from"] = (path.parent / values["init_from"]).resolve()
+    for key, cls in sections.items():
+        values[key] = read_settings(reader, key, raw.get(key), cls)
+    rollout = values["rollout"]
+    if rollout.backend == "ray":
+        per_worker = rollout.envs_per_worker or values["n_envs"] // rollout.workers
+        if per_worker < 1:
+            raise reader.error("rollout.envs_per_worker", f"must be >= 1 (n_envs {values['n_envs']} over "
+                               f"{rollout.workers} workers gives {per_worker})")
+        values["rollout"] = RolloutConfig(**{**rollout.__dict__, "envs_per_worker": per_worker})
+        values["n_envs"] = rollout.workers * per_worker
+    return values
+
+
+def _check_batch_sizes(reader: YamlReader, config: RunConfig, path: Path) -> None:
+    """A minibatch never larger than its rollout: the run's, the warm-up's, each stage's."""
     rollout = config.ppo.n_steps * config.n_envs
     if config.ppo.batch_size > rollout:
         raise reader.error("ppo.batch_size", f"{config.ppo.batch_size} exceeds the rollout size "
@@ -371,10 +370,10 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
         raise reader.error("ppo.warmup.batch_size", f"{warmup_batch} exceeds the warm-up's rollout size "
                            f"n_steps x n_envs = {warmup_rollout}")
     n_steps, batch_size = config.ppo.n_steps, config.ppo.batch_size
-    for index, stage in enumerate(curriculum.stages):  # overrides stay in force until changed
+    for index, stage in enumerate(config.curriculum.stages):  # overrides stay in force until changed
         n_steps = stage.ppo.as_dict().get("n_steps", n_steps)
         batch_size = stage.ppo.as_dict().get("batch_size", batch_size)
         if batch_size > n_steps * config.n_envs:
-            raise ConfigError(f"{curriculum_path}: {stage_label(index, stage.name)} ppo: batch_size {batch_size} exceeds the "
-                              f"rollout size n_steps x n_envs = {n_steps} x {config.n_envs} of this run ({path})")
-    return config
+            raise ConfigError(f"{config.curriculum_path}: {stage_label(index, stage.name)} ppo: batch_size {batch_size} "
+                              f"exceeds the rollout size n_steps x n_envs = {n_steps} x {config.n_envs} of this run "
+                              f"({path})")
