@@ -6,9 +6,10 @@
 
 import sys
 
+try:
+    from myo_sds.cli.train import main
+except KeyboardInterrupt:  # Ctrl-C while Python starts: nothing began
+    sys.exit(130)
+
 if __name__ == "__main__":
-    try:
-        from myo_sds.cli.train import main
-    except KeyboardInterrupt:  # Ctrl-C while Python starts: nothing began
-        sys.exit(130)
     sys.exit(main())
