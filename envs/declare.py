@@ -108,16 +108,22 @@ def split_message(path: str, message: str) -> tuple[str, str]:
 def check_keys(name: str, written: Any, allowed: tuple[str, ...]) -> None:
     """A written mapping's keys all among ``allowed``, else ``ValueError`` naming the first other
     one, the nearest allowed name and all of them."""
-    import difflib
     from collections.abc import Mapping
 
     if not isinstance(written, Mapping):
         raise ValueError(f"{name}: expected a mapping, got {type(written).__name__} {written!r}")
     for key in written:
         if key not in allowed:
-            near = difflib.get_close_matches(str(key), allowed, n=1)
-            hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise ValueError(f"{name + '.' if name else ''}{key}: unknown key{hint}; allowed: {', '.join(allowed)}")
+            raise ValueError(f"{name + '.' if name else ''}{key}: unknown key{near_hint(key, allowed)}; "
+                             f"allowed: {', '.join(allowed)}")
+
+
+def near_hint(key: Any, allowed) -> str:
+    """`` (did you mean 'x'?)`` for the allowed name nearest an unknown one, or nothing."""
+    import difflib
+
+    near = difflib.get_close_matches(str(key), list(allowed), n=1)
+    return f" (did you mean {near[0]!r}?)" if near else ""
 
 
 # -- parsers -----------------------------------------------------------------------------

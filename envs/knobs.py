@@ -18,6 +18,7 @@ from myo_sds.envs.declare import (  # noqa: F401  (the knobs' helpers)
     Parser,
     boolean,
     describe,
+    near_hint,
     number,
     one_of,
     optional,
@@ -109,16 +110,12 @@ def parse_probability(name: str, value: Any) -> float:
 
 
 def check_known(kind: str, given: Mapping[str, Any], allowed: Iterable[str]) -> None:
-    """Raise ``ValueError`` naming every unknown key, the nearest allowed one and all allowed."""
-    import difflib
-
+    """Raise ``ValueError`` naming every unknown key, the nearest allowed one and all allowed
+    (for keyword arguments; a written mapping is checked by ``declare.check_keys``)."""
     allowed = sorted(allowed)
     unknown = [key for key in given if key not in allowed]
     if unknown:
-        hints = []
-        for key in unknown:
-            near = difflib.get_close_matches(str(key), allowed, n=1)
-            hints.append(f"{key!r}" + (f" (did you mean {near[0]!r}?)" if near else ""))
+        hints = [f"{key!r}{near_hint(key, allowed)}" for key in unknown]
         raise ValueError(f"unknown {kind} {', '.join(hints)}; allowed: {', '.join(allowed)}")
 
 
