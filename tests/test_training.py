@@ -448,7 +448,9 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
         # An untrained policy's episodes earn a few alive steps: any return >= 1 passes.
         "advance: {metric: eval_reward, threshold: 1, window: 8, max_steps: 2048}\n"
         "    evaluate: {every: 128, episodes: 2, env: stage, select: reward}").replace(
-        "env: {direction: ccw, period: 20}", "env: {direction: random, period: 20, rsi_probability: 0.5}")
+        "env: {direction: ccw, period: 20}", "env: {direction: random, period: 20, rsi_probability: 0.5}").replace(
+        "advance: {metric: score, threshold: 0.9, window: 8}",
+        "advance: {metric: eval_reward, threshold: 5000, window: 8}\n    evaluate: {every: 256, episodes: 1}")
     run = tmp_path / "run"
     state = CurriculumTrainer.start(write_config(tmp_path, total=640, curriculum=curriculum),
                                     run_dir=run, progress=False).run()
@@ -473,6 +475,8 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
     assert sum(v["episodes"] for v in counted.values()) == len(rest) and set(counted) <= {"hold", "cw", "ccw"}
     text = format_summary(summary)
     assert "balls at rest" in text and "stage-end probe" in text and "eval return" in text
+    # The current stage passes on its evaluations; its trend is its training episodes' score.
+    assert summary.stages[1].status == "current" and "stage 2 trend (training score over" in text
     assert scalar_events(folder.tensorboard_dir, "eval/reward")
     # A resumable export carries the evaluation log; a resume forgets evaluations past its checkpoint.
     copy = folder.export_resumable(tmp_path / "carry")

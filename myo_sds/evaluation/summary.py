@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from myo_sds.curricula.advancement import episode_metric
-from myo_sds.curricula.schema import load_curriculum
+from myo_sds.curricula.schema import EVALUATION_METRICS, load_curriculum
 from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.evaluation.episodes import per_start_phase
 from myo_sds.run_folder import EpisodeRecord, RunFolder
@@ -108,7 +108,7 @@ def summarize(run_dir: str | Path) -> RunSummary:
             base.evaluated_best_reward, base.evaluated_last_reward = state.best_evaluated_reward, state.last_evaluated_reward
             in_stage = [r for r in records if r.stage_index == index]
             if rule is not None and in_stage:
-                values = _metric_values(in_stage, rule.metric)
+                values = _metric_values(in_stage, rule.window_metric)
                 steps = np.array([r.step for r in in_stage])
                 for mark in np.linspace(steps[0], steps[-1], TREND_POINTS):
                     upto = values[steps <= mark][-rule.window:]
@@ -225,7 +225,8 @@ def format_summary(summary: RunSummary, now: float | None = None) -> str:
     current = [s for s in summary.stages if s.trend]
     for s in current:
         points = ", ".join(f"{value:.3f} at {_steps(step)}" for step, value in s.trend)
-        lines.append(f"stage {s.index} trend ({s.metric} over the last {s.window} episodes): {points}")
+        metric = "training score" if s.metric in EVALUATION_METRICS else s.metric
+        lines.append(f"stage {s.index} trend ({metric} over the last {s.window} episodes): {points}")
     rest = [s for s in summary.stages if s.rest_starts]
     if rest:
         lines.append("episodes begun with the balls at rest (not on their targets), by direction: "
