@@ -58,9 +58,17 @@ def train(folder: Path, total: int, overrides: tuple[str, ...] = ()) -> tuple[Cu
     return trainer, rollouts
 
 
-def test_one_worker_collects_bit_identical_rollouts_to_the_local_backend(tmp_path, local_cluster):
-    local, expected = train(tmp_path / "local", 512)
-    remote, got = train(tmp_path / "ray", 512, ("rollout.backend=ray", "rollout.workers=1"))
+# Chained goals and a privileged critic: the same rollouts on either backend too.
+EXTRAS = ("defaults.goal_chain={after_solved: 2}", "policy.critic_extra=[ball_spin, goal_phase]")
+
+
+@pytest.mark.parametrize("extras", [(), EXTRAS], ids=["plain", "chained-goals-privileged-critic"])
+def test_one_worker_collects_bit_identical_rollouts_to_the_local_backend(tmp_path, local_cluster, extras):
+    local, expected = train(tmp_path / "local", 512, extras)
+    remote, got = train(tmp_path / "ray", 512, extras + ("rollout.backend=ray", "rollout.workers=1"))
+    if extras:
+        assert remote.venv.observation_space.shape == (86 + 6 + 4,)
+        assert any(e.goals for e in RunFolder(remote.run_dir).read_episodes())
     remote.close()
     # A worker logs nothing itself: no logger folder SB3 would make for it at every rollout.
     assert not list(local_cluster.glob("SB3-*"))
