@@ -63,8 +63,10 @@ def our_curves(run_dir: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 
 def near(steps: np.ndarray, values: np.ndarray, at: int) -> float:
+    """Mean of the evaluations within COMPARE_SPAN of `at`; where there are none (their stage 1
+    was evaluated every ~0.5-1M env steps), the line between the neighbouring two."""
     mask = np.abs(steps - at) <= COMPARE_SPAN
-    return float(values[mask].mean()) if mask.any() else float("nan")
+    return float(values[mask].mean()) if mask.any() else float(np.interp(at, steps, values))
 
 
 def compare(ours: dict, theirs: dict) -> list[str]:
