@@ -5,7 +5,8 @@ weights: pos_dist 1 + 1, alive 1, solved 5; an episode's maximum is ~1,200) agai
 in the stage. Theirs come from `evaluations.csv` beside this file (`extract.py`); ours from a
 run folder's `evaluations.csv` (`configs/baoding_sds.yaml`, whose stages follow theirs). Prints,
 per stage, ours and theirs at our latest evaluated step (each the mean of the evaluations
-within +-200k env steps of it) and their ratio; draws one panel per stage.
+within +-200k env steps of it) and their ratio, then the stage table (env steps, hours,
+evaluation return first -> best -> last, ours beside theirs); draws one panel per stage.
 
     python experiments/winner_2022/overlay.py ~/runs/baoding_sds-s0 --out experiments/winner_2022/overlay.png
 """
@@ -83,6 +84,30 @@ def compare(ours: dict, theirs: dict) -> list[str]:
     return lines
 
 
+def stage_table(run_dir: Path, ours: dict) -> list[str]:
+    """Markdown: per stage, ours (env steps, hours, evaluation return first -> best -> last) beside theirs."""
+    from myo_sds.evaluation.summary import summarize
+
+    theirs = {}
+    with (HERE / "stages.csv").open(newline="") as file:
+        for row in csv.DictReader(file):
+            theirs[int(row["stage"])] = row
+    lines = ["| stage | ours: status | env steps | hours | return first -> best -> last | theirs: env steps | return first -> best -> last |",
+             "|---|---|---|---|---|---|---|"]
+    for stage in summarize(run_dir).stages:
+        if stage.name not in THEIR_STAGES:
+            continue
+        rows = [theirs[n] for n in THEIR_STAGES[stage.name]]
+        their_steps = sum(int(r["env_steps"]) for r in rows)
+        their_returns = (f"{float(rows[0]['eval_first']):.0f} -> {max(float(r['eval_best']) for r in rows):.0f}"
+                         f" -> {float(rows[-1]['eval_last']):.0f}")
+        values = ours.get(stage.name, (np.array([]), np.array([])))[1]
+        our_returns = f"{values[0]:.0f} -> {values.max():.0f} -> {values[-1]:.0f}" if len(values) else "-"
+        lines.append(f"| {stage.name} | {stage.status} | {stage.env_steps / 1e6:.2f}M | {stage.wall_s / 3600:.1f} | "
+                     f"{our_returns} | {their_steps / 1e6:.2f}M | {their_returns} |")
+    return lines
+
+
 def plot(ours: dict, theirs: dict, path: Path, label: str) -> None:
     import matplotlib
 
@@ -121,6 +146,7 @@ def main() -> None:
     args = parser.parse_args()
     ours, theirs = our_curves(args.run), their_curves()
     print("\n".join(compare(ours, theirs)))
+    print("\n".join(stage_table(args.run, ours)))
     plot(ours, theirs, args.out, args.label or args.run.name)
     print(f"figure: {args.out}")
 
