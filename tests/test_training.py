@@ -272,10 +272,18 @@ def test_learning_rate_decay_follows_env_steps_across_stages_and_resume(tmp_path
     assert state.stage_index == 1 and resumed.model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(expected)
 
 
+def _as_at_a_terminal() -> None:
+    # A command started in the background of a non-interactive shell (as CI may start the suite)
+    # inherits SIGINT ignored, and Python keeps it so until the trainer installs its handler; a
+    # user's Ctrl-C reaches a foreground process whose SIGINT is the default.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def run_train(args: list[str], cwd: Path, **kwargs) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.Popen([sys.executable, str(REPO / "train.py"), *args], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kwargs)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=_as_at_a_terminal, **kwargs)
 
 
 @pytest.mark.slow  # real processes and signals
