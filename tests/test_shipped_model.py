@@ -84,3 +84,33 @@ def test_shipped_policy_keeps_its_recorded_noisy_score_on_any_cpu(model):
     # a 0.02 floor for a policy whose noisy episodes barely differ).
     tolerance = 4 * recorded.std() / np.sqrt(NOISY_EPISODES) + 0.02
     assert abs(now.mean() - recorded[:NOISY_EPISODES].mean()) <= tolerance, (now, recorded[:NOISY_EPISODES])
+
+
+def test_episodes_run_together_are_the_episodes_run_one_at_a_time():
+    """A stage's evaluation runs its episodes in lockstep (one batched forward pass per step, the
+    envs on two threads): each is the episode ``run_episode`` plays with that seed, its start
+    exactly and its course up to the batched arithmetic's last bits; a batch of one is exact."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from myo_sds.evaluation.episodes import make_env, run_episode, run_episodes_together
+
+    ref = ev.resolve_checkpoint(MODELS / "baoding_p1_2022")
+    policy = ev.load_policy(ref, "baoding")
+    seeds = range(6)
+    with ThreadPoolExecutor(2) as pool:
+        for env, same_course in (("p2", False), ("p1_2022", True)):
+            choice = ev.choose_env(ref, env, start_noise=0.02)
+            one_env = make_env(choice)
+            alone = [run_episode(policy, one_env, choice, seed) for seed in seeds]
+            together = run_episodes_together(policy, [make_env(choice) for _ in seeds], choice, seeds, pool)
+            # p2 draws a phase, direction and period per seed: the episodes come back in seed order.
+            assert [(e.start_phase, e.direction) for e in together] == [(e.start_phase, e.direction) for e in alone]
+            if not same_course:
+                assert len({e.start_phase for e in alone}) == len(alone)
+                assert run_episodes_together(policy, [make_env(choice)], choice, [3]) == [alone[3]]
+                continue
+            # p1_2022 under start noise is a stable task for this policy (no drops, scores 0.37-0.51):
+            # there the batched arithmetic moves an episode by a few solved steps at most.
+            for one, batched in zip(alone, together):
+                assert not one.dropped and not batched.dropped
+                assert abs(one.score - batched.score) <= 0.05, (one, batched)

@@ -93,15 +93,17 @@ class LoadedPolicy:
     normalizer: Any  # VecNormalize with frozen statistics, or None
 
     def act(self, obs: np.ndarray, state, episode_start: bool):
-        batch = obs[None]
+        action, state = self.act_together(obs[None], state, np.array([episode_start]))
+        return action[0], state
+
+    def act_together(self, batch: np.ndarray, state, episode_starts: np.ndarray):
+        """Deterministic actions for a batch of observations (one row per episode), one forward pass."""
         full = self.model.observation_space.shape[0]
         if batch.shape[1] < full:  # a privileged critic's extra inputs: the actor never reads them
-            batch = np.concatenate([batch, np.zeros((1, full - batch.shape[1]), batch.dtype)], axis=1)
+            batch = np.concatenate([batch, np.zeros((len(batch), full - batch.shape[1]), batch.dtype)], axis=1)
         if self.normalizer is not None:
             batch = self.normalizer.normalize_obs(batch)
-        action, state = self.model.predict(batch, state=state, episode_start=np.array([episode_start]),
-                                           deterministic=True)
-        return action[0], state
+        return self.model.predict(batch, state=state, episode_start=episode_starts, deterministic=True)
 
 
 def load_policy(ref: CheckpointRef, task: str) -> LoadedPolicy:

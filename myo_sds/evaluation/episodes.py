@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 from collections.abc import Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -202,6 +203,38 @@ def run_episode(policy: LoadedPolicy, env, choice: EnvChoice, seed: int, frames:
     horizon = env.spec.max_episode_steps
     return EpisodeResult(solved_steps=solved, length=length, horizon=horizon, dropped=bool(terminated),
                          effort=effort / length, direction=_official_direction(env), task=choice.task)
+
+
+def run_episodes_together(policy: LoadedPolicy, envs: Sequence, choice: EnvChoice, seeds: Sequence[int],
+                          pool: Executor | None = None) -> list[EpisodeResult]:
+    """Deterministic episodes on our env, one per env and seed, in lockstep: one batched forward
+    pass per step for all of them, the envs stepped on ``pool``'s threads (MuJoCo releases the
+    GIL). Each episode is ``run_episode``'s with that seed up to the last bits of the batched
+    arithmetic, which a long chaotic episode can amplify."""
+    if choice.official:
+        raise ValueError("episodes run together on our env only")
+    observations = []
+    for env, seed in zip(envs, seeds, strict=True):
+        obs, _ = env.reset(seed=seed)
+        if choice.start_noise:
+            obs = move_hand_joints(env, choice, start_offsets(seed, choice.start_noise,
+                                                              TASK_SPECS[choice.task].hand_joints))
+        observations.append(obs)
+    batch = np.stack(observations)
+    results: list[EpisodeResult | None] = [None] * len(seeds)
+    state, starts = None, np.ones(len(seeds), dtype=bool)
+
+    def step(index: int):
+        return index, envs[index].step(actions[index])
+
+    while running := [i for i, result in enumerate(results) if result is None]:
+        actions, state = policy.act_together(batch, state, starts)
+        starts[:] = False
+        for index, (obs, _, terminated, truncated, info) in (pool.map(step, running) if pool else map(step, running)):
+            batch[index] = obs  # a finished episode's row stays in the batch, its actions unused
+            if terminated or truncated:
+                results[index] = info["episode_result"]
+    return results
 
 
 def _episodes_worker(args: tuple[CheckpointRef, EnvChoice, list[int]]) -> list[EpisodeResult]:

@@ -4,22 +4,28 @@ stage's or a preset, scored as ``evaluate.py`` scores them and logged to the run
 ``evaluations.csv``.
 
 It reads the model and the current normalization statistics and draws nothing from the
-training's random streams (its env is its own, reset with seeds 0 .. episodes-1), so a run
-with evaluations trains exactly as one without them.
+training's random streams (its envs are its own, reset with seeds 0 .. episodes-1), so a run
+with evaluations trains exactly as one without them. Its episodes run together, one batched
+forward pass per step and the envs stepped on every CPU (about twice as fast as one at a time:
+the training's envs and update wait meanwhile); ``evaluate.py --env stage:NAME`` plays the same
+seeds one at a time, the same episodes up to the last bits of the batched arithmetic.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from myo_sds.curricula.schema import Curriculum, Stage, StageEndProbe
 from myo_sds.curricula.state import CurriculumState
 from myo_sds.envs.metrics import EpisodeResult, drop_rate, official_score
 from myo_sds.evaluation.checkpoints import EnvChoice, LoadedPolicy
-from myo_sds.evaluation.episodes import make_env, run_episode
+from myo_sds.evaluation.episodes import make_env, run_episodes_together
 from myo_sds.run_folder import EvaluationRecord
+from myo_sds.threads import available_cpus
 
 
 @dataclass(frozen=True)
@@ -52,7 +58,8 @@ class StageEvaluator:
     def __init__(self, curriculum: Curriculum) -> None:
         self.curriculum = curriculum
         self.task = curriculum.task
-        self._envs: dict[tuple[str, float], object] = {}
+        self._envs: dict[tuple[str, float], list] = {}  # the episodes' envs, one per episode
+        self._pool: ThreadPoolExecutor | None = None  # steps them
         self._last_step: int | None = None  # the env step of the last evaluation
 
     def _choice(self, env: str, stage: Stage, start_noise: float) -> EnvChoice:
@@ -70,13 +77,22 @@ class StageEvaluator:
 
     def run(self, model, venv, choice: EnvChoice, episodes: int) -> EvaluationResult:
         """``episodes`` deterministic episodes (seeds 0 ..) of ``model``, its observations
-        normalized by ``venv``'s current statistics."""
+        normalized by ``venv``'s current statistics, run together (``run_episodes_together``)."""
         key = (choice.name, choice.start_noise)
-        env = self._envs.get(key)
-        if env is None:
-            env = self._envs[key] = make_env(choice)
+        envs = self._envs.setdefault(key, [])
+        envs.extend(make_env(choice) for _ in range(episodes - len(envs)))
+        if self._pool is None and available_cpus() > 1:
+            self._pool = ThreadPoolExecutor(available_cpus(), thread_name_prefix="evaluation")
         policy = LoadedPolicy(model, venv if hasattr(venv, "normalize_obs") else None)
-        return EvaluationResult.of(choice.name, [run_episode(policy, env, choice, seed) for seed in range(episodes)])
+        # One torch thread: the envs' threads have the CPUs (2.5 s against 3.4 s with two for 20
+        # Baoding episodes), and the arithmetic is the same whatever threads the update last used.
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            results = run_episodes_together(policy, envs[:episodes], choice, range(episodes), self._pool)
+        finally:
+            torch.set_num_threads(threads)
+        return EvaluationResult.of(choice.name, results)
 
     def score(self, model, venv, stage: Stage) -> float:
         """The mean official score of the stage's evaluation episodes."""
@@ -146,6 +162,10 @@ class StageEvaluator:
                             f"{state.best_evaluated:.3f}"
 
     def close(self) -> None:
-        for env in self._envs.values():
-            env.close()
+        for envs in self._envs.values():
+            for env in envs:
+                env.close()
         self._envs.clear()
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
