@@ -114,3 +114,24 @@ def test_episodes_run_together_are_the_episodes_run_one_at_a_time():
             for one, batched in zip(alone, together):
                 assert not one.dropped and not batched.dropped
                 assert abs(one.score - batched.score) <= 0.05, (one, batched)
+
+
+def test_a_stage_evaluator_keeps_one_task_s_envs_and_replays_its_episodes_after_a_probe():
+    """The stage's evaluations and the stage-end probe alternate: the evaluator keeps the envs of
+    one task at a time (one MyoHand env is ~64 MB), and the stage's episodes are the same after
+    the probe as before it."""
+    from myo_sds.curricula.schema import load_curriculum
+    from myo_sds.training.stage_evaluation import StageEvaluator
+
+    curriculum = load_curriculum(MODELS.parent / "curricula" / "baoding_sds.yaml")
+    evaluator = StageEvaluator(curriculum)
+    policy = ev.load_policy(ev.resolve_checkpoint(MODELS / "baoding_p1_2022"), "baoding")
+    hold = curriculum.stages[curriculum.stage_index("hold-rsi")]
+    try:
+        before = evaluator.run(policy.model, policy.normalizer, evaluator.choice(hold), 3)
+        assert len(evaluator._envs) == 3
+        probe = evaluator.run(policy.model, policy.normalizer, evaluator._choice("stage:fixed-10s", hold, 0.0), 2)
+        assert (probe.env, probe.episodes, len(evaluator._envs)) == ("stage:fixed-10s", 2, 2)
+        assert evaluator.run(policy.model, policy.normalizer, evaluator.choice(hold), 3) == before
+    finally:
+        evaluator.close()

@@ -53,12 +53,15 @@ class EvaluationResult:
 
 
 class StageEvaluator:
-    """Runs evaluation episodes; keeps one env per evaluated task distribution."""
+    """Runs evaluation episodes; keeps the envs (one per episode) of the last evaluated task."""
 
     def __init__(self, curriculum: Curriculum) -> None:
         self.curriculum = curriculum
         self.task = curriculum.task
-        self._envs: dict[tuple[str, float], list] = {}  # the episodes' envs, one per episode
+        # The envs of the last evaluated task (~64 MB each for the MyoHand: one per episode, so
+        # a set per stage kept for the whole run would grow by ~1.3 GB per stage).
+        self._envs: list = []
+        self._envs_key: tuple[str, float] | None = None
         self._pool: ThreadPoolExecutor | None = None  # steps them
         self._last_step: int | None = None  # the env step of the last evaluation
 
@@ -79,7 +82,10 @@ class StageEvaluator:
         """``episodes`` deterministic episodes (seeds 0 ..) of ``model``, its observations
         normalized by ``venv``'s current statistics, run together (``run_episodes_together``)."""
         key = (choice.name, choice.start_noise)
-        envs = self._envs.setdefault(key, [])
+        if self._envs_key != key:  # a stage's own task, or a probe's: only one set is kept
+            self._close_envs()
+            self._envs_key = key
+        envs = self._envs
         envs.extend(make_env(choice) for _ in range(episodes - len(envs)))
         if self._pool is None and available_cpus() > 1:
             self._pool = ThreadPoolExecutor(available_cpus(), thread_name_prefix="evaluation")
@@ -161,11 +167,13 @@ class StageEvaluator:
         return best, line + f"the next stage starts from the best evaluated policy: step {best}, score " \
                             f"{state.best_evaluated:.3f}"
 
+    def _close_envs(self) -> None:
+        for env in self._envs:
+            env.close()
+        self._envs, self._envs_key = [], None
+
     def close(self) -> None:
-        for envs in self._envs.values():
-            for env in envs:
-                env.close()
-        self._envs.clear()
+        self._close_envs()
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
