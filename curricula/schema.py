@@ -263,7 +263,7 @@ def load_curriculum(path: str | Path, overrides: tuple[str, ...] = ()) -> Curric
         key = stage_label(index, stage_name)
         # An error in a stage names the file that last wrote it (a base's, when inherited).
         stage_reader = reader.stage_reader(stage_name, key)
-        stages.append(_stage(stage_reader, key, task, stage_name, stage_raw, defaults))
+        stages.append(_stage(stage_reader, key, task, stage_name, stage_raw, defaults, reader))
     probe = _probe(reader, task, raw.get("probe"), tuple(s.name for s in stages))
     changed = bool(reader.origins or reader.overrides)
     if changed:
@@ -274,10 +274,17 @@ def load_curriculum(path: str | Path, overrides: tuple[str, ...] = ()) -> Curric
 
 
 def _stage(reader: YamlReader, key: str, task: str, name: str, raw: Mapping[str, Any],
-           defaults: Mapping[str, Any]) -> Stage:
+           defaults: Mapping[str, Any], curriculum_reader: YamlReader) -> Stage:
     overrides = reader.mapping(f"{key} env", raw.get("env"), ("preset", *TASK_SPECS[task].knobs.help()))
     env = {**defaults, **overrides}
-    distribution = _stage_distribution(reader, f"{key} env", task, env)
+    try:
+        distribution = _stage_distribution(reader, f"{key} env", task, env)
+    except ConfigError as error:
+        # A bad value the stage inherits from ``defaults`` is named where ``defaults`` set it.
+        knob_path, _, message = str(error).partition(f"{key} env: ")[2].partition(": ")
+        if message and knob_path.split(".")[0] in defaults and knob_path.split(".")[0] not in overrides:
+            raise curriculum_reader.error(f"defaults.{knob_path}", f"{message} (in {key})") from None
+        raise
     advance = _advance_rule(reader, f"{key} advance", raw.get("advance"))
     ppo = read_settings(reader, f"{key} ppo", raw.get("ppo"), PpoOverrides)
     evaluation = _stage_evaluation(reader, f"{key} evaluate", task, raw.get("evaluate"))

@@ -409,3 +409,18 @@ def test_print_config_shows_every_value_and_where_it_came_from(tmp_path, capsys,
     assert rows["stages.a.env.drop_height"] == ["1.25", "default"]
     assert rows["stages.b.ppo.n_steps"] == ["64", "base.yaml"] and "stages.a.ppo.n_steps" not in rows
     assert not (tmp_path / "runs").exists()  # nothing trained, no run folder
+
+
+def test_a_bad_default_is_named_where_the_default_was_set_not_where_the_stage_was(tmp_path):
+    """A variant that writes only ``defaults`` is the file to blame for a bad default every
+    inherited stage reads; a stage's own bad value still names the stage."""
+    write(tmp_path, GOOD_CURRICULUM.replace("rsi_probability: 1.0", "rsi_probability: 1.0, reward_weights: {alive: 1.0}"),
+          "base.yaml")
+    variant = write(tmp_path, "base: base.yaml\ndefaults: {reward_weights: {alive: null}}\n", "variant.yaml")
+    with pytest.raises(ConfigError) as caught:
+        load_curriculum(variant)
+    assert str(caught.value).startswith(f"{variant}: defaults.reward_weights.alive: expected a number, got None "
+                                        "(in stage 1 (a))")
+    own = write(tmp_path, "base: base.yaml\nstages:\n  a: {env: {rsi_probability: 2}}\n", "own.yaml")
+    with pytest.raises(ConfigError, match=r"own.yaml: stage 1 \(a\) env: rsi_probability"):
+        load_curriculum(own)
