@@ -481,8 +481,11 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
     summary = summarize(run)
     counted = summary.stages[1].rest_starts
     assert sum(v["episodes"] for v in counted.values()) == len(rest) and set(counted) <= {"hold", "cw", "ccw"}
+    rest_sectors = summary.stages[1].rest_by_start_phase
+    assert sum(v["episodes"] for v in rest_sectors.values()) == len([e for e in rest if e.step <= state.num_timesteps])
     text = format_summary(summary)
     assert "balls at rest" in text and "stage-end probe" in text and "eval return" in text
+    assert f"stage 2, its {sum(v['episodes'] for v in rest_sectors.values())} episodes begun with the balls at rest" in text
     # The current stage passes on its evaluations; its trend is its training episodes' score.
     assert "stage 2 trend (training score over" in text
     assert scalar_events(folder.tensorboard_dir, "eval/reward")
