@@ -367,9 +367,11 @@ def _run_settings(reader: YamlReader, raw: Mapping[str, Any], path: Path) -> dic
 def _check_batch_sizes(reader: YamlReader, config: RunConfig, path: Path) -> None:
     """A minibatch never larger than its rollout: the run's, the warm-up's, each stage's."""
     rollout = config.ppo.n_steps * config.n_envs
+    # Either side may be the one just changed: say where each came from.
+    sources = f"(n_steps from {reader.origin('ppo.n_steps')}, n_envs from {reader.origin('n_envs')})"
     if config.ppo.batch_size > rollout:
         raise reader.error("ppo.batch_size", f"{config.ppo.batch_size} exceeds the rollout size "
-                           f"n_steps x n_envs = {rollout}")
+                           f"n_steps x n_envs = {config.ppo.n_steps} x {config.n_envs} = {rollout} {sources}")
     warmup = config.ppo.warmup
     warmup_batch = warmup.batch_size or config.ppo.batch_size
     warmup_rollout = (warmup.n_steps or config.ppo.n_steps) * config.n_envs

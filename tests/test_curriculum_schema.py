@@ -193,6 +193,10 @@ def test_stage_batch_size_is_checked_against_the_run(tmp_path):
     with pytest.raises(ConfigError, match=r"stage 2 \(b\) ppo: batch_size 256 exceeds the rollout size .* 64 x 2"):
         load_run_config(path)
     assert load_run_config(path, ("n_envs=4",)).n_envs == 4
+    # A --set that shrinks the rollout below the file's batch size is named beside it.
+    with pytest.raises(ConfigError, match=r"run.yaml: ppo.batch_size: 64 exceeds the rollout size n_steps x n_envs "
+                                          r"= 16 x 2 = 32 \(n_steps from --set ppo.n_steps=16, n_envs from .*run.yaml\)"):
+        load_run_config(path, ("ppo.n_steps=16",))
 
 
 def test_set_overrides_are_checked_against_the_schema(tmp_path):
