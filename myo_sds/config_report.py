@@ -29,6 +29,15 @@ def _text(value: Any) -> str:
     return str(value)
 
 
+def _origin(key: str, origins: dict[str, str]) -> str | None:
+    """Where ``key`` came from; a mapping merged from several files (e.g. reward weights a
+    variant changes one of) names each of them, in the order they were read."""
+    if key in origins:
+        return origins[key]
+    parts = list(dict.fromkeys(o for k, o in origins.items() if k.startswith(key + ".")))
+    return " + ".join(parts) if parts else None
+
+
 def _rows(prefix: str, settings: Any, origins: dict[str, str], fallback: str = "default") -> list[tuple[str, str, str]]:
     rows = []
     for f in fields(settings):
@@ -36,7 +45,7 @@ def _rows(prefix: str, settings: Any, origins: dict[str, str], fallback: str = "
         key = f"{prefix}{f.name}"
         if value is UNSET:
             continue
-        origin = origins.get(key) or next((o for k, o in origins.items() if k.startswith(key + ".")), fallback)
+        origin = _origin(key, origins) or fallback
         rows.append((key, _text(value), origin))
     return rows
 
@@ -63,11 +72,10 @@ def config_rows(config: RunConfig) -> list[tuple[str, str, str]]:
         preset = stage.env.get("preset", "p1")
         for f in fields(stage.distribution):
             own, shared = f"{prefix}env.{f.name}", f"defaults.{f.name}"
-            if own in c_origins or any(k.startswith(own + ".") for k in c_origins):
-                origin = c_origins.get(own) or next(o for k, o in c_origins.items() if k.startswith(own + "."))
-            elif shared in c_origins or any(k.startswith(shared + ".") for k in c_origins):
-                origin = "defaults: " + (c_origins.get(shared)
-                                         or next(o for k, o in c_origins.items() if k.startswith(shared + ".")))
+            if _origin(own, c_origins):
+                origin = _origin(own, c_origins)
+            elif _origin(shared, c_origins):
+                origin = "defaults: " + _origin(shared, c_origins)
             elif f.name in knobs_class.PRESETS.get(preset, {}):
                 origin = f"preset {preset}"
             else:
@@ -84,17 +92,17 @@ def config_rows(config: RunConfig) -> list[tuple[str, str, str]]:
 
 
 def _short(origin: str) -> str:
-    """A file under the working folder by its relative path."""
+    """Files under the working folder by their relative paths (each of a `` + `` list)."""
     from pathlib import Path
 
     prefix = "defaults: " if origin.startswith("defaults: ") else ""
-    path = Path(origin[len(prefix):])
-    if path.is_absolute():
-        try:
-            return prefix + str(path.relative_to(Path.cwd()))
-        except ValueError:
-            pass
-    return origin
+    parts = []
+    for part in origin[len(prefix):].split(" + "):
+        path = Path(part)
+        if path.is_absolute() and path.is_relative_to(Path.cwd()):
+            part = str(path.relative_to(Path.cwd()))
+        parts.append(part)
+    return prefix + " + ".join(parts)
 
 
 def format_config(config: RunConfig) -> str:

@@ -397,8 +397,9 @@ def test_print_config_shows_every_value_and_where_it_came_from(tmp_path, capsys,
 
     write(tmp_path, GOOD_CURRICULUM.replace("defaults: {direction: hold, period: static, rsi_probability: 1.0}",
                                             "defaults: {direction: hold, period: static, rsi_probability: 1.0, "
-                                            "preset: p1_2022}"), "base.yaml")
-    write(tmp_path, "base: base.yaml\nstages:\n  b: {advance: {threshold: 0.7}}\n", "variant.yaml")
+                                            "preset: p1_2022, reward_weights: {alive: 1.0, solved: 5.0}}"), "base.yaml")
+    write(tmp_path, "base: base.yaml\ndefaults: {reward_weights: {solved: 2.0}}\n"
+                    "stages:\n  b: {advance: {threshold: 0.7}}\n", "variant.yaml")
     write(tmp_path, "curriculum: variant.yaml\nn_envs: 2\n", "run.yaml")
     monkeypatch.chdir(tmp_path)
     assert main(["--config", "run.yaml", "--set", "stages.a.env.solved_radius=0.02", "--print-config"]) == 0
@@ -411,6 +412,8 @@ def test_print_config_shows_every_value_and_where_it_came_from(tmp_path, capsys,
     assert rows["stages.a.env.direction"] == ["hold", "defaults:", "base.yaml"]
     assert rows["stages.a.env.start_angle"] == ["on_balls", "preset", "p1_2022"]
     assert rows["stages.a.env.drop_height"] == ["1.25", "default"]
+    # A mapping merged from two files names both.
+    assert rows["stages.a.env.reward_weights"][-4:] == ["defaults:", "base.yaml", "+", "variant.yaml"]
     assert rows["stages.b.ppo.n_steps"] == ["64", "base.yaml"] and "stages.a.ppo.n_steps" not in rows
     assert not (tmp_path / "runs").exists()  # nothing trained, no run folder
 
