@@ -50,8 +50,8 @@ class StageSummary:
     # The rest-start signal: the stage's training episodes that began with the balls at rest (not
     # placed on their targets), by direction: how many, their median solved steps and mean score.
     rest_starts: dict[str, dict[str, Any]] = field(default_factory=dict)
-    # The current stage's rest starts by the targets' start phase: from which phases the policy
-    # picks the resting balls up (the 2022 start puts the targets on them, at 135 degrees).
+    # The stage's rest starts by the targets' start phase: from which phases the policy picks
+    # the resting balls up (the 2022 start puts the targets on them, at 135 degrees).
     rest_by_start_phase: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
@@ -118,9 +118,10 @@ def summarize(run_dir: str | Path) -> RunSummary:
                     if len(upto):
                         base.trend.append((int(mark), float(upto.mean())))
             base.by_start_phase = per_start_phase(in_stage[-BREAKDOWN_EPISODES:])
-            base.rest_by_start_phase = per_start_phase([r for r in in_stage if r.start == "rest"])
         if index <= state.stage_index:
-            base.rest_starts = rest_starts([r for r in records if r.stage_index == index])
+            in_stage = [r for r in records if r.stage_index == index]
+            base.rest_starts = rest_starts(in_stage)
+            base.rest_by_start_phase = per_start_phase([r for r in in_stage if r.start == "rest"])
         stages.append(base)
     # An exported model (no checkpoints of its own) is a snapshot: its file times say nothing.
     saved_at = folder.state_file.stat().st_mtime if folder.checkpoint_dir.is_dir() else None
@@ -251,6 +252,7 @@ def format_summary(summary: RunSummary, now: float | None = None) -> str:
             n = sum(sector["episodes"] for sector in s.by_start_phase.values())
             lines.append(f"stage {s.index}, its last {n:,} episodes by {summary.start_phase_name}:")
             lines.extend(_sector_table(s.by_start_phase))
+    for s in summary.stages:
         if s.rest_by_start_phase:
             n = sum(sector["episodes"] for sector in s.rest_by_start_phase.values())
             lines.append(f"stage {s.index}, its {n:,} episodes begun with the balls at rest, by {summary.start_phase_name}:")
