@@ -116,7 +116,7 @@ def test_episodes_run_together_are_the_episodes_run_one_at_a_time():
                 assert abs(one.score - batched.score) <= 0.05, (one, batched)
 
 
-def test_a_stage_evaluator_keeps_one_task_s_envs_and_replays_its_episodes_after_a_probe():
+def test_a_stage_evaluator_keeps_one_task_s_envs_and_replays_its_episodes_after_a_probe(monkeypatch):
     """The stage's evaluations and the stage-end probe alternate: the evaluator keeps the envs of
     one task at a time (one MyoHand env is ~64 MB), and the stage's episodes are the same after
     the probe as before it."""
@@ -133,5 +133,11 @@ def test_a_stage_evaluator_keeps_one_task_s_envs_and_replays_its_episodes_after_
         probe = evaluator.run(policy.model, policy.normalizer, evaluator._choice("stage:fixed-10s", hold, 0.0), 2)
         assert (probe.env, probe.episodes, len(evaluator._envs)) == ("stage:fixed-10s", 2, 2)
         assert evaluator.run(policy.model, policy.normalizer, evaluator.choice(hold), 3) == before
+        # More episodes than run together: they run in turns on the same envs, seeds in order.
+        monkeypatch.setattr("myo_sds.training.stage_evaluation.TOGETHER", 2)
+        evaluator.close()
+        in_turns = evaluator.run(policy.model, policy.normalizer, evaluator.choice(hold), 3)
+        assert len(evaluator._envs) == 2 and in_turns.episodes == 3
+        assert abs(in_turns.score - before.score) <= 0.1  # the same episodes up to the last bits
     finally:
         evaluator.close()

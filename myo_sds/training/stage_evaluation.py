@@ -52,6 +52,11 @@ class EvaluationResult:
                 "drop_rate": self.drop_rate, "median_solved_steps": self.median_solved_steps}
 
 
+# Episodes run together at most: each needs its own env (~64 MB for the MyoHand), and 20 (the
+# 2022 winner's evaluation) already make each step's forward pass a batch.
+TOGETHER = 20
+
+
 class StageEvaluator:
     """Runs evaluation episodes; keeps the envs (one per episode) of the last evaluated task."""
 
@@ -86,7 +91,7 @@ class StageEvaluator:
             self._close_envs()
             self._envs_key = key
         envs = self._envs
-        envs.extend(make_env(choice) for _ in range(episodes - len(envs)))
+        envs.extend(make_env(choice) for _ in range(min(episodes, TOGETHER) - len(envs)))
         if self._pool is None and available_cpus() > 1:
             self._pool = ThreadPoolExecutor(available_cpus(), thread_name_prefix="evaluation")
         policy = LoadedPolicy(model, venv if hasattr(venv, "normalize_obs") else None)
@@ -95,7 +100,10 @@ class StageEvaluator:
         threads = torch.get_num_threads()
         torch.set_num_threads(1)
         try:
-            results = run_episodes_together(policy, envs[:episodes], choice, range(episodes), self._pool)
+            results = []
+            for first in range(0, episodes, TOGETHER):
+                seeds = range(first, min(first + TOGETHER, episodes))
+                results += run_episodes_together(policy, envs[:len(seeds)], choice, seeds, self._pool)
         finally:
             torch.set_num_threads(threads)
         return EvaluationResult.of(choice.name, results)
