@@ -48,6 +48,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--max-hours", type=float, metavar="H",
                         help="stop after H hours of training in this call (checkpointed; --resume continues)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--background", action="store_true",
+                        help="train at idle priority (Linux SCHED_IDLE): only on CPU time other processes leave, "
+                             "so a run beside it keeps its speed")
     parser.add_argument("--print-config", action="store_true",
                         help="with --config (and --set): print every setting the run would use and where it came "
                              "from (file, base, --set, defaults, preset, default), then exit")
@@ -55,8 +58,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     if args.export and args.to is None:
         parser.error("--export needs --to DIR")
     if args.resume and (args.overrides or args.seed is not None or args.n_envs is not None or args.run_dir):
-        parser.error("--resume continues a run as configured; only --total-steps, --max-hours and "
-                     "--no-progress apply")
+        parser.error("--resume continues a run as configured; only --total-steps, --max-hours, "
+                     "--no-progress and --background apply")
     if args.init_from and not args.config:
         parser.error("--init-from starts a new run: use it with --config")
     if args.print_config and not args.config:
@@ -144,6 +147,14 @@ def _left_behind(trainer, args) -> str:
 def main(argv: list[str] | None = None) -> int:
     set_process_environment()  # before NumPy, torch and MuJoCo load
     args = parse_args(argv)
+    if args.background:  # before any thread starts: threads inherit the class
+        from myo_sds.threads import run_at_idle_priority
+
+        try:
+            run_at_idle_priority()
+        except OSError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
     started: list = []  # the trainer, once made
     try:
         return _main(args, started)
