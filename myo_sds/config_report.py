@@ -72,10 +72,11 @@ def config_rows(config: RunConfig) -> list[tuple[str, str, str]]:
         preset = stage.env.get("preset", "p1")
         for f in fields(stage.distribution):
             own, shared = f"{prefix}env.{f.name}", f"defaults.{f.name}"
-            if _origin(own, c_origins):
-                origin = _origin(own, c_origins)
-            elif _origin(shared, c_origins):
-                origin = "defaults: " + _origin(shared, c_origins)
+            own_origin, shared_origin = _origin(own, c_origins), _origin(shared, c_origins)
+            if own_origin:
+                origin = own_origin
+            elif shared_origin:
+                origin = "defaults: " + shared_origin
             elif f.name in knobs_class.PRESETS.get(preset, {}):
                 origin = f"preset {preset}"
             else:
