@@ -14,10 +14,9 @@ reproducible only statistically.
 libgomp's 300,000 to 10,000 before torch loads: the same speed on a quiet machine, a far
 smaller stall in the moments before other processes are noticed.
 
-Processes at idle priority (``SCHED_IDLE``, e.g. ``train.py --background``) do not count as
-others: the kernel runs them only on CPU time nothing else wants, so the update keeps all its
-threads beside them (a run beside one lost ~5% of its speed instead of ~20% at ``nice 19``;
-``experiments/RESULTS.md``, "Sharing the machine with a background run").
+Processes at idle priority (``SCHED_IDLE``, ``train.py --background``) count as others too:
+beside one, two update threads ran the live chain at 0.15x its speed (each barrier's wake-up
+let it in), one thread at 0.95x (``experiments/RESULTS.md``, "A second run at idle priority").
 """
 
 from __future__ import annotations
@@ -96,8 +95,7 @@ class CpuContention:
     """
 
     def __init__(self, stat_path: Path = Path("/proc/stat"), clock: Callable[[], float] = time.monotonic,
-                 own_cpu_seconds: Callable[[], float] | None = None, proc_path: Path = Path("/proc"),
-                 idle_rescan_s: float = 10.0) -> None:
+                 own_cpu_seconds: Callable[[], float] | None = None) -> None:
         self.stat_path, self.clock = stat_path, clock
         self.own_cpu_seconds = own_cpu_seconds or (lambda: sum(os.times()[:2]))
         try:
@@ -105,7 +103,6 @@ class CpuContention:
         except AttributeError:
             self.cpus = set()
         self.tick = _clock_ticks_per_second()
-        self.idle_class = IdleClassCpu(proc_path, self.tick, clock, idle_rescan_s)
         self._last = self._read()
 
     def _busy_seconds(self) -> float | None:
@@ -121,71 +118,17 @@ class CpuContention:
                 busy += sum(values) - values[3] - values[4]
         return busy / self.tick
 
-    def _read(self) -> tuple[float, float | None, float, float]:
-        return self.clock(), self._busy_seconds(), self.own_cpu_seconds(), self.idle_class.seconds_since_last()
+    def _read(self) -> tuple[float, float | None, float]:
+        return self.clock(), self._busy_seconds(), self.own_cpu_seconds()
 
     def others_cpus(self) -> float:
-        """CPUs' worth of time other processes used since the last call (0 when unknown), less
-        what processes at idle priority used: the kernel hands them only what we leave."""
+        """CPUs' worth of time other processes used since the last call (0 when unknown)."""
         now = self._read()
-        (then_wall, then_busy, then_own, _), self._last = self._last, now
+        (then_wall, then_busy, then_own), self._last = self._last, now
         elapsed = now[0] - then_wall
         if then_busy is None or now[1] is None or elapsed <= 0:
             return 0.0
-        return max(0.0, (now[1] - then_busy) - (now[2] - then_own) - now[3]) / elapsed
-
-
-SCHED_IDLE = 5  # Linux's idle scheduling class, as field 41 of /proc/<pid>/stat gives it
-
-
-def _parse_proc_stat(text: str) -> tuple[int, int] | None:
-    """(scheduling policy, user + system clock ticks) of a /proc/<pid>/stat line."""
-    fields = text[text.rfind(")") + 2:].split()  # the name in parentheses may hold spaces
-    try:
-        return int(fields[38]), int(fields[11]) + int(fields[12])
-    except (IndexError, ValueError):
-        return None
-
-
-class IdleClassCpu:
-    """CPU time used by other processes at idle priority (``SCHED_IDLE``: ``train.py
-    --background``, ``chrt --idle 0``). The kernel runs them only on CPUs nothing else wants, so
-    their use is not contention: a foreground run keeps its update threads beside them.
-
-    The processes are found by a scan of ``/proc`` at most every ``rescan_s`` seconds (one is
-    counted as contention until then); between scans only their own stat files are read.
-    """
-
-    def __init__(self, proc_path: Path, tick: float, clock: Callable[[], float], rescan_s: float) -> None:
-        self.proc_path, self.tick, self.clock, self.rescan_s = proc_path, tick, clock, rescan_s
-        self.own_pid = os.getpid()
-        self._ticks: dict[int, int] = {}  # idle-class pid -> its CPU ticks at the last reading
-        self._scanned_at = -math.inf
-
-    def _read(self, pid: int) -> tuple[int, int] | None:
-        try:
-            return _parse_proc_stat((self.proc_path / str(pid) / "stat").read_text())
-        except OSError:  # the process has ended
-            return None
-
-    def seconds_since_last(self) -> float:
-        """Their CPU seconds since the previous call (a process first seen now counts from now)."""
-        pids = set(self._ticks)
-        if self.clock() - self._scanned_at >= self.rescan_s:
-            self._scanned_at = self.clock()
-            try:
-                pids = {int(name) for name in os.listdir(self.proc_path) if name.isdigit()}
-            except OSError:
-                pids = set()
-            pids.discard(self.own_pid)
-        now: dict[int, int] = {}
-        for pid in pids:
-            read = self._read(pid)
-            if read is not None and read[0] == SCHED_IDLE:
-                now[pid] = read[1]
-        used = sum(ticks - self._ticks[pid] for pid, ticks in now.items() if pid in self._ticks)
-        self._ticks = now
-        return max(0, used) / self.tick
+        return max(0.0, (now[1] - then_busy) - (now[2] - then_own)) / elapsed
 
 
 def run_at_idle_priority() -> None:

@@ -64,7 +64,7 @@ def test_contention_is_the_busy_time_of_our_cpus_less_our_own(monkeypatch, tmp_p
     clock, own = FakeClock(), [0.0]
     monkeypatch.setattr(threads, "_clock_ticks_per_second", lambda: 100.0)
     write(0, 0, 0)
-    contention = CpuContention(stat, clock=clock, own_cpu_seconds=lambda: own[0], proc_path=tmp_path / "no-proc")
+    contention = CpuContention(stat, clock=clock, own_cpu_seconds=lambda: own[0])
     # Over 2 s: our CPUs were busy 3 s in all (cpu2 is not ours), 1 s of it ours.
     clock.now, own[0] = 2.0, 1.0
     write(200, 100, 1000)
@@ -72,72 +72,6 @@ def test_contention_is_the_busy_time_of_our_cpus_less_our_own(monkeypatch, tmp_p
     # Nothing readable: no contention seen.
     stat.unlink()
     assert contention.others_cpus() == 0.0
-
-
-def _write_proc_stat(proc, pid: int, name: str, policy: int, utime: int, stime: int) -> None:
-    """A /proc/<pid>/stat line: fields 3.. after the name; utime 14, stime 15, policy 41."""
-    fields = ["S"] + ["0"] * 49
-    fields[11], fields[12], fields[38] = str(utime), str(stime), str(policy)
-    (proc / str(pid)).mkdir(parents=True, exist_ok=True)
-    (proc / str(pid) / "stat").write_text(f"{pid} ({name}) {' '.join(fields)}\n")
-
-
-def test_processes_at_idle_priority_are_not_contention(monkeypatch, tmp_path):
-    monkeypatch.setattr(threads.os, "sched_getaffinity", lambda pid: {0, 1})
-    monkeypatch.setattr(threads, "_clock_ticks_per_second", lambda: 100.0)
-    stat, proc = tmp_path / "stat", tmp_path / "proc"
-    stat.write_text("cpu0 0 0 0 0 0 0 0 0\ncpu1 0 0 0 0 0 0 0 0\n")
-    _write_proc_stat(proc, 41, "python train.py", threads.SCHED_IDLE, 1000, 50)  # a --background run
-    _write_proc_stat(proc, 42, "make", 0, 7, 3)  # an ordinary process
-    (proc / "self").mkdir()  # not a pid: skipped
-    clock, own = FakeClock(), [0.0]
-    contention = CpuContention(stat, clock=clock, own_cpu_seconds=lambda: own[0], proc_path=proc, idle_rescan_s=10.0)
-    # Over 2 s: our CPUs busy 3.5 s, 0.5 s ours, 1.6 s the background run's (its 2 s and
-    # 200 + 40 ticks less what it had), 1.4 s the ordinary process's.
-    clock.now, own[0] = 2.0, 0.5
-    stat.write_text("cpu0 200 0 0 0 0 0 0 0\ncpu1 0 0 150 0 0 0 0 0\n")
-    _write_proc_stat(proc, 41, "python train.py", threads.SCHED_IDLE, 1120, 90)
-    _write_proc_stat(proc, 42, "make", 0, 147, 3)
-    assert contention.others_cpus() == pytest.approx((3.5 - 0.5 - 1.6) / 2.0)
-    # A background run that ends between readings takes its time with it: nothing is subtracted.
-    (proc / "41" / "stat").unlink()
-    clock.now = 3.0
-    stat.write_text("cpu0 300 0 0 0 0 0 0 0\ncpu1 0 0 150 0 0 0 0 0\n")
-    assert contention.others_cpus() == pytest.approx(1.0)
-
-
-@pytest.mark.skipif(not hasattr(threads.os, "SCHED_IDLE"), reason="Linux scheduling classes")
-def test_the_kernel_reports_a_background_process_at_idle_priority(tmp_path):
-    """``run_at_idle_priority`` (``train.py --background``) puts a process in the idle class, and
-    the real /proc shows its CPU time there; an ordinary process's is not taken for it."""
-    import subprocess
-    import sys
-    import time
-
-    busy = ("import sys, time\nfrom myo_sds.threads import run_at_idle_priority\n"
-            "if sys.argv[1] == 'idle': run_at_idle_priority()\n"
-            "print('ready', flush=True)\nend = time.time() + 6\nwhile time.time() < end: pass\n")
-    seen = {}  # kind -> whether the reader took the child for idle-class, and its CPU seconds there
-    for kind in ("idle", "ordinary"):
-        child = subprocess.Popen([sys.executable, "-c", busy, kind], stdout=subprocess.PIPE, text=True)
-        try:
-            assert child.stdout.readline().strip() == "ready"
-            reader = threads.IdleClassCpu(threads.Path("/proc"), threads._clock_ticks_per_second(), time.monotonic, 0.0)
-            reader.seconds_since_last()
-            first = reader._ticks.get(child.pid)
-            deadline = time.monotonic() + 4.0
-            while time.monotonic() < deadline:  # a busy machine leaves it less
-                time.sleep(0.5)
-                reader.seconds_since_last()
-                if first is None or (reader._ticks.get(child.pid, first) - first) / reader.tick >= 0.2:
-                    break
-            last = reader._ticks.get(child.pid)
-            seen[kind] = (last is not None, 0.0 if last is None else (last - first) / reader.tick)
-        finally:
-            child.kill()
-            child.wait()
-    assert seen["idle"][0] and seen["idle"][1] >= 0.2
-    assert seen["ordinary"] == (False, 0.0)
 
 
 def test_available_cpus_follows_affinity_quota_and_omp_num_threads(monkeypatch, tmp_path):
