@@ -149,6 +149,24 @@ class CurriculumState:
 
     # the whole run -------------------------------------------------------------------
 
+    def trained_stages(self) -> list[str]:
+        """The stages the run has trained in so far, in order (the current one once it has steps)."""
+        return list(self.steps_per_stage)
+
+    def curriculum_mismatch(self, stage_names: Sequence[str]) -> str | None:
+        """Why a curriculum with stages ``stage_names`` cannot continue this run, or None: the
+        stages the run has trained in must keep their names and places; the stages after them
+        may be added, removed or changed (e.g. the run's ``curriculum.yaml`` edited before a
+        ``--resume``)."""
+        trained = self.trained_stages()
+        if len(stage_names) < len(trained):
+            return (f"it has {len(stage_names)} stages, and the run has trained in {len(trained)} "
+                    f"({', '.join(trained)})")
+        for index, name in enumerate(trained):
+            if stage_names[index] != name:
+                return f"stage {index + 1} is {stage_names[index]!r} where the run trained in {name!r}"
+        return None
+
     def stage_starts(self) -> list[int]:
         """The env step at which each stage reached so far began."""
         return [0] + [t.at_step for t in self.history]

@@ -131,3 +131,36 @@ def test_a_config_error_is_reported_before_torch_and_mujoco_load(tmp_path):
     assert result.stdout.split() == ["2", "False", "False"], result.stderr
     assert result.stderr.startswith("error: --set ppo.lerning_rate=1e-4: ppo.lerning_rate: unknown key "
                                     "(did you mean 'learning_rate'?)")
+
+
+def test_a_run_resumes_with_the_stages_ahead_of_it_edited(tiny_run, tmp_path):
+    """A user may change what comes next in a run's own curriculum.yaml: the current stage's
+    settings and the stages after it. The stages it has trained in keep their names and places."""
+    from myo_sds.curricula.schema import ConfigError
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run.path, run)
+    trained = RunFolder(run).latest_checkpoint().read_state()
+    assert trained.trained_stages() == ["easy", "hard"]
+    original = (run / "curriculum.yaml").read_text()
+
+    (run / "curriculum.yaml").write_text(original.replace("name: easy", "name: warm-up"))
+    with pytest.raises(ConfigError, match=r"curriculum\.yaml: stage 1 is 'warm-up' where the run trained in 'easy'"
+                                          r".* only the stages after 'hard' may be added"):
+        CurriculumTrainer.resume(run, progress=False, total_steps=4096)
+    (run / "curriculum.yaml").write_text(original.split("  - name: hard")[0])  # 'hard' removed
+    with pytest.raises(ConfigError, match="it has 1 stages, and the run has trained in 2 \\(easy, hard\\)"):
+        CurriculumTrainer.resume(run, progress=False, total_steps=4096)
+
+    # The current stage ends 64 steps from now, and a stage added after it takes over.
+    ahead = trained.stage_steps + 64
+    edited = original.replace("advance: {metric: score, threshold: 0.9, window: 8}",
+                              f"advance: {{metric: score, threshold: 0.9, window: 8, max_steps: {ahead}}}")
+    edited += ("  - name: turn-cw\n    env: {direction: cw, period: 20}\n"
+               "    advance: {metric: score, threshold: 0.9, window: 8}\n")
+    (run / "curriculum.yaml").write_text(edited)
+    state = CurriculumTrainer.resume(run, progress=False, total_steps=3072).run()
+    assert [t.stage for t in state.history] == ["easy", "hard"]
+    assert state.history[-1].decision == "timed_out"
+    assert state.trained_stages() == ["easy", "hard", "turn-cw"]
+    assert {row.direction for row in episode_rows(run) if row.stage == "turn-cw"} == {"cw"}

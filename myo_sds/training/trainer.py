@@ -169,6 +169,12 @@ class CurriculumTrainer:
                                   f"{state.num_timesteps} steps already trained")
             config = load_run_config(folder.config_file, (f"total_steps={total_steps}",))
             folder.config_file.write_text(yaml.safe_dump(dict(config.source), sort_keys=False))
+        mismatch = state.curriculum_mismatch([s.name for s in config.curriculum.stages])
+        if mismatch:
+            trained = state.trained_stages()
+            raise ConfigError(f"{folder.curriculum_file}: {mismatch}; the stages the run has trained in "
+                              f"({', '.join(trained)}) must stay as they were, in that order; only the "
+                              f"stages after {trained[-1]!r} may be added, removed or changed")
         state.status = RunStatus.RUNNING
         stage = config.curriculum.stages[state.stage_index]
         venv = VecNormalize.load(str(checkpoint.vecnormalize), build_training_venv(config, stage).venv)
