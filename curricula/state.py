@@ -159,13 +159,16 @@ class CurriculumState:
         may be added, removed or changed (e.g. the run's ``curriculum.yaml`` edited before a
         ``--resume``)."""
         trained = self.trained_stages()
+        why = None
         if len(stage_names) < len(trained):
-            return (f"it has {len(stage_names)} stages, and the run has trained in {len(trained)} "
-                    f"({', '.join(trained)})")
-        for index, name in enumerate(trained):
-            if stage_names[index] != name:
-                return f"stage {index + 1} is {stage_names[index]!r} where the run trained in {name!r}"
-        return None
+            why = f"it has {len(stage_names)} stages, and the run has trained in {len(trained)} ({', '.join(trained)})"
+        for index, name in enumerate(trained[:len(stage_names)]):
+            if why is None and stage_names[index] != name:
+                why = f"stage {index + 1} is {stage_names[index]!r} where the run trained in {name!r}"
+        if why is None:
+            return None
+        return (f"{why}; the stages the run has trained in ({', '.join(trained)}) must stay as they were, in "
+                f"that order; only the stages after {trained[-1]!r} may be added, removed or changed")
 
     def stage_starts(self) -> list[int]:
         """The env step at which each stage reached so far began."""

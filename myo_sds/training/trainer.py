@@ -144,9 +144,8 @@ class CurriculumTrainer:
     def resume(cls, run_dir: str | Path, progress: bool = True,
                total_steps: int | None = None) -> CurriculumTrainer:
         """Continue a run from its latest complete checkpoint: same stage, counters, optimizer,
-        normalization state and random streams, same TensorBoard folder. ``total_steps`` raises
-        the run's step budget (recorded in its config), which also continues a run that
-        ended at its budget."""
+        normalization state and random streams, same TensorBoard folder, under its own (possibly
+        edited) curriculum. ``total_steps`` raises the run's step budget (in its config)."""
         from stable_baselines3.common.logger import Logger
         from stable_baselines3.common.vec_env import VecNormalize
 
@@ -169,12 +168,8 @@ class CurriculumTrainer:
                                   f"{state.num_timesteps} steps already trained")
             config = load_run_config(folder.config_file, (f"total_steps={total_steps}",))
             folder.config_file.write_text(yaml.safe_dump(dict(config.source), sort_keys=False))
-        mismatch = state.curriculum_mismatch([s.name for s in config.curriculum.stages])
-        if mismatch:
-            trained = state.trained_stages()
-            raise ConfigError(f"{folder.curriculum_file}: {mismatch}; the stages the run has trained in "
-                              f"({', '.join(trained)}) must stay as they were, in that order; only the "
-                              f"stages after {trained[-1]!r} may be added, removed or changed")
+        if mismatch := state.curriculum_mismatch([s.name for s in config.curriculum.stages]):
+            raise ConfigError(f"{folder.curriculum_file}: {mismatch}")
         state.status = RunStatus.RUNNING
         stage = config.curriculum.stages[state.stage_index]
         venv = VecNormalize.load(str(checkpoint.vecnormalize), build_training_venv(config, stage).venv)
