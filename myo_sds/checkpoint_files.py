@@ -49,4 +49,6 @@ def statistics_beside(model: Path) -> Path:
     name = model.name
     if name.startswith("rl_model_") and name.endswith("_steps.zip"):
         return model.with_name(name.replace("rl_model_", "rl_model_vecnormalize_").replace(".zip", ".pkl"))
-    return model.with_name(name.replace("model", "vecnormalize").replace(".zip", ".pkl"))
+    if "model" in name:  # final_model.zip, best_model_<steps>_steps.zip
+        return model.with_name(name.replace("model", "vecnormalize").replace(".zip", ".pkl"))
+    return model.with_name(f"{model.stem}_vecnormalize.pkl")  # a stage's hand-off: stages/<NN>_<stage>.zip

@@ -360,8 +360,8 @@ class RunFolder:
 
     def stage_policy_files(self, stage_index: int, stage: str) -> tuple[Path, Path]:
         """The policy stage ``stage_index`` (from 0) handed on, and its statistics."""
-        stem = self.path / STAGES_DIR / f"{stage_index + 1:02d}_{stage}"
-        return stem.with_name(stem.name + ".zip"), stem.with_name(stem.name + "_vecnormalize.pkl")
+        model = self.path / STAGES_DIR / f"{stage_index + 1:02d}_{stage}.zip"
+        return model, statistics_beside(model)
 
     def save_stage_policy(self, stage_index: int, stage: str, model, venv) -> None:
         model_file, statistics = self.stage_policy_files(stage_index, stage)

@@ -17,6 +17,7 @@ from tiny_run import CONFIG, CURRICULUM, scalar_events, write_config
 
 from myo_sds.curricula.schema import ConfigError
 from myo_sds.curricula.state import RunStatus
+from myo_sds.evaluation.checkpoints import load_policy, resolve_checkpoint
 from myo_sds.run_folder import RunFolder
 from myo_sds.training import CurriculumTrainer
 
@@ -474,6 +475,10 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
     assert easy.probe == {"env": "stage:hard", "episodes": 2, "score": probes[0].score, "reward": probes[0].reward,
                           "drop_rate": probes[0].drop_rate, "median_solved_steps": probes[0].median_solved_steps}
     assert all(path.is_file() for path in folder.stage_policy_files(0, "easy"))
+    # The policy a stage handed on is a checkpoint like any other, to evaluate or start from.
+    handed_on = resolve_checkpoint(folder.stage_policy_files(0, "easy")[0])
+    assert handed_on.vecnormalize == run / "stages" / "01_easy_vecnormalize.pkl"
+    assert load_policy(handed_on, "baoding").normalizer is not None
     episodes = [e for e in folder.read_episodes() if e.stage == "hard"]
     rest = [e for e in episodes if e.start == "rest"]
     assert rest and len(rest) < len(episodes) and {e.start for e in episodes} == {"rest", "on_targets"}
