@@ -452,7 +452,7 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
         "defaults: {direction: hold, period: static, rsi_probability: 1.0, start_angle: uniform}",
         "defaults: {direction: hold, period: static, rsi_probability: 1.0, start_angle: uniform,\n"
         "           reward_weights: {alive: 1.0, solved: 5.0}}\n"
-        "probe: {env: 'stage:hard', episodes: 2}").replace(
+        "probe: {env: 'stage:hard', episodes: 6}").replace(
         "advance: {metric: score, threshold: 0.01, window: 8}",
         # An untrained policy's episodes earn a few alive steps: any return >= 1 passes.
         "advance: {metric: eval_reward, threshold: 1, window: 8, max_steps: 2048}\n"
@@ -471,9 +471,16 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
     assert easy.decision == "passed" and easy.at_step == 128 and len(periodic) == 1
     assert periodic[0].reward >= 1 and periodic[0].best and easy.best_evaluated_reward == periodic[0].reward
     probes = [e for e in evaluations if e.kind == "probe"]
-    assert [(p.stage, p.env, p.episodes, p.step) for p in probes] == [("easy", "stage:hard", 2, 128)]
-    assert easy.probe == {"env": "stage:hard", "episodes": 2, "score": probes[0].score, "reward": probes[0].reward,
-                          "drop_rate": probes[0].drop_rate, "median_solved_steps": probes[0].median_solved_steps}
+    assert [(p.stage, p.env, p.episodes, p.step) for p in probes] == [("easy", "stage:hard", 6, 128)]
+    by_direction = easy.probe.pop("by_direction")
+    assert easy.probe.pop("env") == "stage:hard"
+    assert easy.probe == pytest.approx({"episodes": 6, "score": probes[0].score, "reward": probes[0].reward,
+                                        "drop_rate": probes[0].drop_rate,
+                                        "median_solved_steps": probes[0].median_solved_steps}, rel=1e-5)
+    # The probe's episodes by direction (the stage draws hold, cw or ccw): they add up.
+    assert set(by_direction) <= {"hold", "cw", "ccw"} and len(by_direction) >= 2
+    assert sum(v["episodes"] for v in by_direction.values()) == 6
+    assert sum(v["drop_rate"] * v["episodes"] for v in by_direction.values()) == pytest.approx(6 * probes[0].drop_rate)
     assert all(path.is_file() for path in folder.stage_policy_files(0, "easy"))
     # The policy a stage handed on is a checkpoint like any other, to evaluate or start from.
     handed_on = resolve_checkpoint(folder.stage_policy_files(0, "easy")[0])
@@ -490,6 +497,9 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
     assert sum(v["episodes"] for v in rest_sectors.values()) == len([e for e in rest if e.step <= state.num_timesteps])
     text = format_summary(summary)
     assert "balls at rest" in text and "stage-end probe" in text and "eval return" in text
+    first = next(iter(by_direction))
+    assert (f"; by direction: {first} {by_direction[first]['episodes']}, median "
+            f"{by_direction[first]['median_solved_steps']:.0f}") in text
     assert f"stage 2, its {sum(v['episodes'] for v in rest_sectors.values())} episodes begun with the balls at rest" in text
     # The current stage passes on its evaluations; its trend is its training episodes' score.
     assert "stage 2 trend (training score over" in text

@@ -217,6 +217,15 @@ def _status_line(summary: RunSummary, now: float) -> str:
     return f"{summary.run_dir}: {status}, {summary.env_steps:,} env steps, {summary.wall_s / 3600:.2f} h of training"
 
 
+def describe_directions(by_direction: dict[str, dict] | None) -> str:
+    """``; by direction: ccw 7, median 5, 86% dropped; ...`` (empty for one direction or none)."""
+    if not by_direction or len(by_direction) < 2:
+        return ""
+    return "; by direction: " + "; ".join(
+        f"{d} {v['episodes']}, median {v['median_solved_steps']:.0f}, {v['drop_rate']:.0%} dropped"
+        for d, v in by_direction.items())
+
+
 def format_summary(summary: RunSummary, now: float | None = None) -> str:
     """The summary as a table a person reads at a glance (``now``: Unix time, for the checkpoint's age)."""
     lines = [_status_line(summary, time.time() if now is None else now)]
@@ -246,7 +255,7 @@ def format_summary(summary: RunSummary, now: float | None = None) -> str:
         for s in probed:
             p = s.probe
             lines.append(f"  stage {s.index} ({s.name}): median solved steps {p['median_solved_steps']:.0f}, "
-                         f"score {p['score']:.3f}, {p['drop_rate']:.0%} dropped")
+                         f"score {p['score']:.3f}, {p['drop_rate']:.0%} dropped{describe_directions(p.get('by_direction'))}")
     for s in summary.stages:
         if s.by_start_phase:
             n = sum(sector["episodes"] for sector in s.by_start_phase.values())

@@ -24,6 +24,7 @@ from myo_sds.curricula.state import CurriculumState
 from myo_sds.envs.metrics import EpisodeResult, drop_rate, official_score
 from myo_sds.evaluation.checkpoints import EnvChoice, LoadedPolicy
 from myo_sds.evaluation.episodes import make_env, run_episodes_together
+from myo_sds.evaluation.summary import describe_directions
 from myo_sds.run_folder import EvaluationRecord
 from myo_sds.threads import available_cpus
 
@@ -39,17 +40,31 @@ class EvaluationResult:
     reward: float | None
     drop_rate: float
     median_solved_steps: float
+    # Baoding: per direction (hold, cw, ccw), its episodes, median solved steps and drop rate; a
+    # policy may pick the balls up from rest one way and not the other.
+    by_direction: dict[str, dict] | None = None
 
     @classmethod
     def of(cls, env: str, results: list[EpisodeResult]) -> EvaluationResult:
         rewards = [r.reward for r in results if r.reward is not None]
+        by_direction = {d: {"episodes": len(group), "median_solved_steps": float(np.median([r.solved_steps for r in group])),
+                            "drop_rate": drop_rate(group)}
+                        for d in sorted({r.direction for r in results if r.direction})
+                        for group in [[r for r in results if r.direction == d]]}
         return cls(env, len(results), official_score(results),
                    float(np.mean(rewards)) if len(rewards) == len(results) else None, drop_rate(results),
-                   float(np.median([r.solved_steps for r in results])))
+                   float(np.median([r.solved_steps for r in results])), by_direction or None)
 
     def as_dict(self) -> dict:
-        return {"env": self.env, "episodes": self.episodes, "score": self.score, "reward": self.reward,
-                "drop_rate": self.drop_rate, "median_solved_steps": self.median_solved_steps}
+        values = {"env": self.env, "episodes": self.episodes, "score": self.score, "reward": self.reward,
+                  "drop_rate": self.drop_rate, "median_solved_steps": self.median_solved_steps}
+        return values | ({"by_direction": self.by_direction} if self.by_direction else {})
+
+    def describe(self) -> str:
+        """One line: score, median solved steps, drops, and per direction when there are several."""
+        text = (f"score {self.score:.3f}, median solved steps {self.median_solved_steps:.0f}, "
+                f"{self.drop_rate:.0%} dropped ({self.episodes} episodes)")
+        return text + describe_directions(self.by_direction)
 
 
 # Episodes run together at most: each needs its own env (~64 MB for the MyoHand), and 20 (the

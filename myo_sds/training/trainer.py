@@ -353,9 +353,8 @@ class CurriculumTrainer:
         if probe is None:
             return None
         result = self.stage_evaluator.probe(self.model, self.venv, probe, self.stage, self.state, self.folder)
-        self.progress_bar.write(f"{stage_label(self.state.stage_index, self.stage.name)} probe on {result.env}: score "
-                                f"{result.score:.3f}, median solved steps {result.median_solved_steps:.0f}, "
-                                f"{result.drop_rate:.0%} dropped ({result.episodes} episodes)")
+        self.progress_bar.write(f"{stage_label(self.state.stage_index, self.stage.name)} probe on {result.env}: "
+                                f"{result.describe()}")
         return result.as_dict()
 
     def _transition(self, decision: Decision) -> None:
