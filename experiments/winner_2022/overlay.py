@@ -95,16 +95,19 @@ def stage_table(run_dir: Path, ours: dict) -> list[str]:
     lines = ["| stage | ours: status | env steps | hours | return first -> best -> last | theirs: env steps | return first -> best -> last |",
              "|---|---|---|---|---|---|---|"]
     for stage in summarize(run_dir).stages:
-        if stage.name not in THEIR_STAGES:
+        if stage.name in THEIR_STAGES:
+            rows = [theirs[n] for n in THEIR_STAGES[stage.name]]
+            their_steps = f"{sum(int(r['env_steps']) for r in rows) / 1e6:.2f}M"
+            their_returns = (f"{float(rows[0]['eval_first']):.0f} -> {max(float(r['eval_best']) for r in rows):.0f}"
+                             f" -> {float(rows[-1]['eval_last']):.0f}")
+        elif stage.env_steps or stage.name in ours:  # a stage of ours that their chain did not have
+            their_steps, their_returns = "- (ours only)", "-"
+        else:
             continue
-        rows = [theirs[n] for n in THEIR_STAGES[stage.name]]
-        their_steps = sum(int(r["env_steps"]) for r in rows)
-        their_returns = (f"{float(rows[0]['eval_first']):.0f} -> {max(float(r['eval_best']) for r in rows):.0f}"
-                         f" -> {float(rows[-1]['eval_last']):.0f}")
         values = ours.get(stage.name, (np.array([]), np.array([])))[1]
         our_returns = f"{values[0]:.0f} -> {values.max():.0f} -> {values[-1]:.0f}" if len(values) else "-"
         lines.append(f"| {stage.name} | {stage.status} | {stage.env_steps / 1e6:.2f}M | {stage.wall_s / 3600:.1f} | "
-                     f"{our_returns} | {their_steps / 1e6:.2f}M | {their_returns} |")
+                     f"{our_returns} | {their_steps} | {their_returns} |")
     return lines
 
 
@@ -125,7 +128,15 @@ def plot(ours: dict, theirs: dict, path: Path, label: str) -> None:
             ax.plot(steps / 1e6, values, color="tab:blue", lw=1.2, label=label)
         ax.set_title(name, fontsize=10)
         ax.grid(alpha=0.3)
-    axes.flat[-1].axis("off")
+    extra = [name for name in ours if name not in THEIR_STAGES]  # stages of ours only, on the last panel
+    if extra:
+        for name in extra:
+            steps, values = ours[name]
+            axes.flat[-1].plot(steps / 1e6, values, lw=1.2, label=name)
+        axes.flat[-1].set_title("ours only: " + ", ".join(extra), fontsize=10)
+        axes.flat[-1].grid(alpha=0.3)
+    else:
+        axes.flat[-1].axis("off")
     for ax in axes[:, 0]:
         ax.set_ylabel("evaluation return (20 episodes)")
     for ax in axes[-1]:
