@@ -159,12 +159,11 @@ class CurriculumState:
         may be added, removed or changed (e.g. the run's ``curriculum.yaml`` edited before a
         ``--resume``)."""
         trained = self.trained_stages()
-        why = None
         if len(stage_names) < len(trained):
             why = f"it has {len(stage_names)} stages, and the run has trained in {len(trained)} ({', '.join(trained)})"
-        for index, name in enumerate(trained[:len(stage_names)]):
-            if why is None and stage_names[index] != name:
-                why = f"stage {index + 1} is {stage_names[index]!r} where the run trained in {name!r}"
+        else:
+            why = next((f"stage {index + 1} is {new!r} where the run trained in {old!r}"
+                        for index, (new, old) in enumerate(zip(stage_names, trained)) if new != old), None)
         if why is None:
             return None
         return (f"{why}; the stages the run has trained in ({', '.join(trained)}) must stay as they were, in "

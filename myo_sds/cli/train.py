@@ -50,7 +50,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--background", action="store_true",
                         help="train at idle priority (Linux SCHED_IDLE): only on CPU time other processes leave, "
-                             "so a run beside it keeps its speed")
+                             "so a run beside it keeps most of its speed")
     parser.add_argument("--print-config", action="store_true",
                         help="with --config (and --set): print every setting the run would use and where it came "
                              "from (file, base, --set, defaults, preset, default), then exit")
