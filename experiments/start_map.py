@@ -4,7 +4,8 @@ Deterministic episodes on our env from a stage's knobs (default: the chain's `fi
 2022 placement), with the targets starting at each of ``--angles`` (degrees on the orbit), in each
 of ``--directions``, at ``--period`` s per revolution, the balls placed on the targets (``--rsi 1``)
 or at rest (``--rsi 0``), each hand joint moved by up to ``--start-noise`` rad at reset. A dead
-zone shows as a few starts with low solved steps and high drops between good ones.
+zone shows as a few starts with low solved steps and high drops between good ones; the default
+angles cover the whole circle, where forgetting shows.
 
     python experiments/start_map.py ~/runs/baoding_sds-s0/stages/02_rotate-30s.zip --directions ccw cw \\
         --angles 90 112 127 135 143 157 180 --period 30 --rsi 1 0
@@ -31,7 +32,8 @@ def main() -> None:
     parser.add_argument("policy", help="a model folder, run folder or checkpoint .zip")
     parser.add_argument("--env", default="stage:fixed-10s", help="the knobs to start from (a preset or stage:NAME)")
     parser.add_argument("--directions", nargs="+", default=["ccw", "cw"], choices=["ccw", "cw", "hold"])
-    parser.add_argument("--angles", nargs="+", type=float, default=[90, 112, 127, 135, 143, 157, 180])
+    # The whole circle by default: a stage that trains a few starts can wear the others away.
+    parser.add_argument("--angles", nargs="+", type=float, default=[0, 45, 90, 135, 180, 225, 270, 315])
     parser.add_argument("--period", type=float, default=30.0)
     parser.add_argument("--rsi", nargs="+", type=float, default=[1.0, 0.0],
                         help="1: the balls placed on the targets; 0: at rest")
