@@ -283,6 +283,11 @@ def test_run_summary_gives_each_stage_its_steps_time_and_measured_value(tiny_run
     assert main(["--status", str(tiny_run.path), "--json", str(tmp_path / "s.json")]) == 0
     printed = capsys.readouterr().out
     assert f"action std of the newest saved policy: mean {summary.action_std[0]:.3f}" in printed
+    # All the tiny run's updates: two rollouts of 2 x 64 env steps, then 28 of 2 x 32 to 2,048.
+    sizes = summary.update_sizes
+    assert (sizes.updates, sizes.first_step, sizes.last_step) == (30, 128, 2048)
+    assert sizes.learning_rate == pytest.approx(1e-4)  # stage 2's rate
+    assert f"updates, {sizes.describe()}" in printed
     assert "1 easy  passed" in printed and f"score {second.measured:.3f} / 0.9" in printed
     assert f"stage 2, its last {len(rows):,} episodes by the targets' start phase:" in printed
     assert json.loads((tmp_path / "s.json").read_text())["stages"][1]["trend"][-1][1] == pytest.approx(second.measured)

@@ -75,3 +75,36 @@ def test_solved_fraction_by_target_phase_sums_over_episodes():
     assert sectors["135-180"] == {"steps": 65, "solved_fraction": pytest.approx(10 / 65)}
     assert len(sectors) == 8
     assert per_target_phase([EpisodeResult(5, 10, 200, True, 0.1)]) == {}
+
+
+def test_update_sizes_read_the_newest_updates_and_let_a_resume_supersede_its_replayed_steps(tmp_path):
+    from torch.utils.tensorboard import SummaryWriter
+
+    from myo_sds.evaluation.update_sizes import recent_update_sizes
+
+    def log(stamp, ks, kl_offset):
+        scratch = tmp_path / f"w{stamp}"
+        with SummaryWriter(str(scratch)) as writer:
+            for k in ks:
+                writer.add_scalar("train/approx_kl", kl_offset + k / 100, 2048 * k)
+                writer.add_scalar("train/clip_fraction", k / 100, 2048 * k)
+                writer.add_scalar("train/explained_variance", 0.5, 2048 * k)
+                writer.add_scalar("train/learning_rate", 1e-4 * k, 2048 * k)
+        (events,) = scratch.glob("events.out.tfevents.*")
+        events.rename(tmp_path / "tb" / f"events.out.tfevents.{stamp}.host.1.0")
+
+    (tmp_path / "tb").mkdir()
+    log(1000, range(1, 11), 0.0)  # updates 1-10, then a crash after the checkpoint at update 6
+    log(2000, range(6, 13), 1.0)  # the resume logs updates 6-12 again
+    # Kept: KL 0.01-0.05 (updates 1-5, first file), 1.06-1.12 (6-12, second); 0.07-0.10 are gone.
+    every = recent_update_sizes(tmp_path / "tb")
+    assert (every.updates, every.first_step, every.last_step) == (12, 2048, 2048 * 12)
+    assert every.approx_kl_median == pytest.approx((1.06 + 1.07) / 2)
+    assert every.learning_rate == pytest.approx(12e-4)
+    newest = recent_update_sizes(tmp_path / "tb", last=4)  # updates 9-12
+    assert (newest.updates, newest.first_step) == (4, 2048 * 9)
+    assert newest.approx_kl_median == pytest.approx(1.105) and newest.approx_kl_p90 == pytest.approx(1.117)
+    assert newest.clip_fraction_median == pytest.approx(0.105) and newest.explained_variance_median == 0.5
+    assert newest.describe().startswith("the last 4 updates (18,432-24,576 env steps): approx KL median 1.105 "
+                                        "(90th percentile 1.117), clip fraction 0.11, explained variance 0.50")
+    assert recent_update_sizes(tmp_path / "missing") is None

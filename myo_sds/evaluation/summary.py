@@ -15,6 +15,7 @@ from myo_sds.curricula.advancement import episode_metric
 from myo_sds.curricula.schema import EVALUATION_METRICS, load_curriculum
 from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.evaluation.episodes import per_start_phase
+from myo_sds.evaluation.update_sizes import UpdateSizes, format_steps, recent_update_sizes
 from myo_sds.run_folder import EpisodeRecord, RunFolder
 
 TREND_POINTS = 5  # measured values shown across the current stage
@@ -69,6 +70,8 @@ class RunSummary:
     # collapsed (the 2022 winner's ended at a mean of 0.116, min 0.086) no longer explores.
     action_std: tuple[float, float, float] | None = None
     start_phase_name: str = "the start phase"  # what the episodes' start phase measures (the task's)
+    # Approximate KL, clip fraction and explained variance of the newest updates (TensorBoard).
+    update_sizes: UpdateSizes | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -126,7 +129,8 @@ def summarize(run_dir: str | Path) -> RunSummary:
     # An exported model (no checkpoints of its own) is a snapshot: its file times say nothing.
     saved_at = folder.state_file.stat().st_mtime if folder.checkpoint_dir.is_dir() else None
     return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages, saved_at,
-                      _action_std(folder), TASK_SPECS[curriculum.task].start_phase_name)
+                      _action_std(folder), TASK_SPECS[curriculum.task].start_phase_name,
+                      recent_update_sizes(folder.tensorboard_dir))
 
 
 def rest_starts(records: list[EpisodeRecord]) -> dict[str, dict[str, Any]]:
@@ -153,10 +157,6 @@ def _action_std(folder: RunFolder) -> tuple[float, float, float] | None:
     _, params, _ = load_from_zip_file(model, load_data=False, device="cpu")
     std = params["policy"]["log_std"].exp()
     return float(std.mean()), float(std.min()), float(std.max())
-
-
-def _steps(step: int) -> str:
-    return f"{step / 1e6:.2f}M" if step >= 1_000_000 else f"{step:,}"
 
 
 STAGE_COLUMNS = ("stage", "status", "env steps", "hours", "episodes", "measured / threshold")
@@ -197,7 +197,7 @@ def _evaluated(s: StageSummary) -> str:
     if s.evaluated_best_reward is not None:
         text += f" (return {s.evaluated_best_reward:.0f})"
     if s.evaluated_best_step is not None:
-        text += f" at {_steps(s.evaluated_best_step)}"
+        text += f" at {format_steps(s.evaluated_best_step)}"
     if s.evaluated_last is not None:
         text += f", last {s.evaluated_last:.3f}"
         if s.evaluated_last_reward is not None:
@@ -232,13 +232,15 @@ def format_summary(summary: RunSummary, now: float | None = None) -> str:
     if summary.action_std is not None:
         mean, low, high = summary.action_std
         lines.append(f"action std of the newest saved policy: mean {mean:.3f} (min {low:.3f}, max {high:.3f})")
+    if summary.update_sizes is not None:
+        lines.append(f"updates, {summary.update_sizes.describe()}")
     header, rows = stage_rows(summary)
     widths = [max(len(str(r[i])) for r in (header, *rows)) for i in range(len(header))]
     for row in (header, *rows):
         lines.append("  ".join(str(v).ljust(w) for v, w in zip(row, widths)).rstrip())
     current = [s for s in summary.stages if s.trend]
     for s in current:
-        points = ", ".join(f"{value:.3f} at {_steps(step)}" for step, value in s.trend)
+        points = ", ".join(f"{value:.3f} at {format_steps(step)}" for step, value in s.trend)
         metric = "training score" if s.metric in EVALUATION_METRICS else s.metric
         lines.append(f"stage {s.index} trend ({metric} over the last {s.window} episodes): {points}")
     rest = [s for s in summary.stages if s.rest_starts]
