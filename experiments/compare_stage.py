@@ -1,0 +1,66 @@
+"""One stage in several runs side by side, by env steps into that stage: a branch against the
+chain it came from (same start policy, one setting changed).
+
+Per bin of ``--bin`` env steps of the stage: the mean stage-evaluation return (20 deterministic
+episodes on the stage's own task, the same seeds in every run) and the training episodes' score
+and drop rate, placed on the targets and at rest.
+
+    python experiments/compare_stage.py rotate-20s ~/runs/baoding_sds-s0 ~/runs/rotate20_lr3e-5-s0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+
+def stage_start(run: Path, stage: str) -> int:
+    """The run env step at which ``stage`` began (0 for a run's first stage, or before the
+    run's first checkpoint)."""
+    state_file = run / "curriculum_state.json"
+    if not state_file.is_file():
+        return 0
+    state = json.loads(state_file.read_text())
+    names = [h["stage"] for h in state["history"]]
+    if stage not in names:
+        return state["stage_start_step"] if state["history"] else 0
+    index = names.index(stage)
+    return 0 if index == 0 else state["history"][index - 1]["at_step"]
+
+
+def table(run: Path, stage: str, bin_steps: int) -> pd.DataFrame:
+    start = stage_start(run, stage)
+    evaluations = pd.read_csv(run / "evaluations.csv")
+    evaluations = evaluations[(evaluations.stage == stage) & (evaluations.kind == "periodic")]
+    episodes = pd.read_csv(run / "episodes.csv")
+    episodes = episodes[episodes.stage == stage]
+    evaluations = evaluations.assign(bin=(evaluations.step - start) // bin_steps)
+    episodes = episodes.assign(bin=(episodes.step - start) // bin_steps)
+    rows = {"eval return": evaluations.groupby("bin").reward.mean()}
+    for start_kind in ("on_targets", "rest"):
+        of_kind = episodes[episodes.start == start_kind]
+        rows[f"{start_kind} score"] = of_kind.groupby("bin").score.mean()
+        rows[f"{start_kind} dropped"] = of_kind.groupby("bin").dropped.mean()
+    return pd.DataFrame(rows)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("stage")
+    parser.add_argument("runs", nargs="+", type=Path)
+    parser.add_argument("--bin", type=int, default=200_000, help="env steps of the stage per row")
+    args = parser.parse_args()
+    for run in args.runs:
+        frame = table(run.expanduser(), args.stage, args.bin)
+        frame.index = [f"{b * args.bin / 1e6:.1f}-{(b + 1) * args.bin / 1e6:.1f}M" for b in frame.index]
+        print(f"{run.name}, {args.stage}:")
+        print(frame.round(2).to_string(na_rep="-"))
+        print(f"  best evaluation {np.nanmax(frame['eval return']):.0f} (bin mean)\n")
+
+
+if __name__ == "__main__":
+    main()
