@@ -63,6 +63,29 @@ def our_curves(run_dir: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     return {name: (np.array(s), np.array(v)) for name, (s, v) in curves.items()}
 
 
+def rate_changes(run_dir: Path) -> dict[str, list[tuple[int, float]]]:
+    """Per stage name: (env steps into the stage, new rate) wherever the learning rate stepped by
+    more than 10% inside a stage (an edit of the run's curriculum; a decaying schedule moves
+    <1% per update), read from the run's TensorBoard log (none in a resumable export)."""
+    from myo_sds.evaluation.update_sizes import read_scalars
+
+    folder = RunFolder(run_dir)
+    state = folder.read_state()
+    if state is None or not folder.tensorboard_dir.is_dir():
+        return {}
+    from myo_sds.curricula.schema import load_curriculum
+
+    names = [stage.name for stage in load_curriculum(folder.curriculum_file).stages]
+    starts = state.stage_starts()
+    rates = sorted(read_scalars(folder.tensorboard_dir)["learning_rate"].items())
+    changes: dict[str, list[tuple[int, float]]] = {}
+    for (_, before), (step, after) in zip(rates, rates[1:]):
+        index = int(np.searchsorted(starts, step, side="right")) - 1
+        if abs(after - before) > 0.1 * before and step - starts[index] > 10_000:
+            changes.setdefault(names[index], []).append((step - starts[index], after))
+    return changes
+
+
 def near(steps: np.ndarray, values: np.ndarray, at: int) -> float:
     """Mean of the evaluations within COMPARE_SPAN of `at`; where there are none (their stage 1
     was evaluated every ~0.5-1M env steps), the line between the neighbouring two."""
@@ -111,7 +134,7 @@ def stage_table(run_dir: Path, ours: dict) -> list[str]:
     return lines
 
 
-def plot(ours: dict, theirs: dict, path: Path, label: str) -> None:
+def plot(ours: dict, theirs: dict, path: Path, label: str, changes: dict | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -126,6 +149,9 @@ def plot(ours: dict, theirs: dict, path: Path, label: str) -> None:
         if name in ours:
             steps, values = ours[name]
             ax.plot(steps / 1e6, values, color="tab:blue", lw=1.2, label=label)
+        for at, rate in (changes or {}).get(name, []):
+            ax.axvline(at / 1e6, color="tab:blue", lw=0.8, ls="--")
+            ax.text(at / 1e6, 60, f" lr {rate:.2g}", color="tab:blue", fontsize=8)
         ax.set_title(name, fontsize=10)
         ax.grid(alpha=0.3)
     extra = [name for name in ours if name not in THEIR_STAGES]  # stages of ours only, on the last panel
@@ -158,7 +184,10 @@ def main() -> None:
     ours, theirs = our_curves(args.run), their_curves()
     print("\n".join(compare(ours, theirs)))
     print("\n".join(stage_table(args.run, ours)))
-    plot(ours, theirs, args.out, args.label or args.run.name)
+    changes = rate_changes(args.run)
+    for name, marks in changes.items():
+        print(f"{name}: learning rate changed at " + ", ".join(f"{at / 1e6:.2f}M (to {rate:.2g})" for at, rate in marks))
+    plot(ours, theirs, args.out, args.label or args.run.name, changes)
     print(f"figure: {args.out}")
 
 
