@@ -67,14 +67,13 @@ def rate_changes(run_dir: Path) -> dict[str, list[tuple[int, float]]]:
     """Per stage name: (env steps into the stage, new rate) wherever the learning rate stepped by
     more than 10% inside a stage (an edit of the run's curriculum; a decaying schedule moves
     <1% per update), read from the run's TensorBoard log (none in a resumable export)."""
+    from myo_sds.curricula.schema import load_curriculum
     from myo_sds.evaluation.update_sizes import read_scalars
 
     folder = RunFolder(run_dir)
     state = folder.read_state()
     if state is None or not folder.tensorboard_dir.is_dir():
         return {}
-    from myo_sds.curricula.schema import load_curriculum
-
     names = [stage.name for stage in load_curriculum(folder.curriculum_file).stages]
     starts = state.stage_starts()
     rates = sorted(read_scalars(folder.tensorboard_dir)["learning_rate"].items())

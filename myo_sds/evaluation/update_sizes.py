@@ -1,8 +1,9 @@
 """How large a run's recent PPO updates were, from its TensorBoard log (``--status``).
 
 A policy whose action std has shrunk moves further in KL for the same step in its mean (the KL
-of a mean shift grows as 1 / std^2), so a constant learning rate can end in updates that clip
-a third of their samples. The stage table does not show that; these few numbers do.
+of a mean shift grows as 1 / std^2), so at a constant learning rate its updates grow. The stage
+table does not show that; these few numbers do. What size is right is for a same-start
+comparison to say, not a fixed KL.
 """
 
 from __future__ import annotations
