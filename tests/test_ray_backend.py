@@ -5,7 +5,9 @@ one clear line for bad input."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
+import tempfile
 import threading
 from dataclasses import replace
 from pathlib import Path
@@ -25,9 +27,12 @@ CAPTURED = ("observations", "actions", "rewards", "log_probs", "episode_starts",
 
 
 @pytest.fixture(scope="module", autouse=True)
-def local_cluster(tmp_path_factory):
-    """A local cluster whose workers have a temporary folder of their own (``worker_tmp``)."""
-    worker_tmp = tmp_path_factory.mktemp("worker_tmp")
+def local_cluster():
+    """A local cluster whose workers have a temporary folder of their own (``worker_tmp``).
+
+    Short and under /tmp, not pytest's basetemp: Ray puts its sockets inside, and an AF_UNIX path
+    may not exceed 107 bytes (pytest's numbered folders grow one digit at a time)."""
+    worker_tmp = Path(tempfile.mkdtemp(prefix="ray-", dir="/tmp" if os.path.isdir("/tmp") else None))
     before = os.environ.get("TMPDIR")
     os.environ["TMPDIR"] = str(worker_tmp)  # the cluster's processes inherit it at start
     try:
@@ -39,6 +44,7 @@ def local_cluster(tmp_path_factory):
             os.environ["TMPDIR"] = before
     yield worker_tmp
     ray.shutdown()
+    shutil.rmtree(worker_tmp, ignore_errors=True)
 
 
 def train(folder: Path, total: int, overrides: tuple[str, ...] = ()) -> tuple[CurriculumTrainer, dict]:

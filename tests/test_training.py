@@ -549,6 +549,30 @@ def test_ctrl_c_at_any_moment_leaves_a_resumable_run_or_none(tmp_path):
     assert "resumable" in outcomes  # the later signals came after training began
 
 
+def test_a_ctrl_c_while_the_compiled_libraries_load_is_held_then_raised():
+    """Raised inside a compiled module's initialization, a KeyboardInterrupt becomes "ImportError:
+    initialization failed" with a traceback (seen at 1.7 s into train.py, in MuJoCo's); the
+    command lines hold it over those imports and raise it after, or drop it if SIGINT was ignored."""
+    from myo_sds.cli import sigint_held
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        reached_end = False
+        with pytest.raises(KeyboardInterrupt):
+            with sigint_held():
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.05)  # the handler has run by now
+                reached_end = True
+        assert reached_end and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        with sigint_held():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def test_a_privileged_critic_sees_more_than_the_actor_and_the_policy_runs_on_the_official_observation(tmp_path):
     """policy.critic_extra: the envs append the named features, the critic reads them, the actor's
     LSTM only the official 86 values; evaluate.py and the resumed run use it as any policy; a policy

@@ -106,8 +106,17 @@ def _run_comparison(ev, refs, folder: Path) -> str:
 def main(argv: list[str] | None = None) -> int:
     set_process_environment()  # before NumPy, torch and MuJoCo load (headless rendering too)
     args = parse_args(argv)
-    from myo_sds import evaluation as ev
-    from myo_sds.curricula.schema import ConfigError
+    from myo_sds.cli import sigint_held
+
+    try:
+        with sigint_held():
+            import mujoco  # noqa: F401  (the envs import it when the first is built)
+
+            from myo_sds import evaluation as ev
+            from myo_sds.curricula.schema import ConfigError
+    except KeyboardInterrupt:
+        print("\ninterrupted: nothing written", file=sys.stderr)
+        return 130
 
     try:
         refs = [ev.resolve_checkpoint(t, args.load_checkpoint, args.load_last_checkpoint) for t in args.targets]

@@ -185,8 +185,13 @@ def _main(args: argparse.Namespace, started: list) -> int:
         from myo_sds.config_report import format_config
 
         return _print(format_config(config))
-    from myo_sds.curricula.state import RunStatus
-    from myo_sds.training import CurriculumTrainer
+    from myo_sds.cli import sigint_held
+
+    with sigint_held():
+        import mujoco  # noqa: F401  (the envs import it when the first is built)
+
+        from myo_sds.curricula.state import RunStatus
+        from myo_sds.training import CurriculumTrainer
 
     try:
         if args.resume:
