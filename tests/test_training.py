@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -637,3 +638,29 @@ def test_resume_of_a_folder_that_is_no_run_says_so(tmp_path, capsys):
                                        "checkpoints/ or final_model.zip inside)\n")
     assert main(["--resume", str(tmp_path / "gone")]) == 2
     assert capsys.readouterr().err == f"error: {tmp_path / 'gone'}: no such file or folder\n"
+
+
+def test_status_before_the_first_checkpoint_shows_the_episode_log_so_far(tmp_path, capsys):
+    """A run whose first checkpoint has not come yet has no state to tabulate, but its episodes:
+    --status says when the checkpoint comes and what the last 100 episodes scored."""
+    from myo_sds.cli.train import main
+    from myo_sds.episode_log import EpisodeRecord
+
+    trainer = CurriculumTrainer.start(write_config(tmp_path, total=100_000), ("checkpoint_every=90000",),
+                                      run_dir=tmp_path / "run", progress=False)
+    trainer.close()
+    assert main(["--status", str(tmp_path / "run")]) == 0
+    assert capsys.readouterr().out == (f"{tmp_path / 'run'}: no checkpoint yet (the first at 90,000 env steps); "
+                                       "no episode has ended yet\n")
+    # 150 episodes: the last 100 are episodes 50..149; every 4th scores 1, every 5th dropped,
+    # solved steps = index % 7 (median of 50..149 % 7: 3).
+    trainer.folder.append_episodes(
+        EpisodeRecord(step=64 * (i + 1), wall_s=float(i), stage_index=0, stage="easy", score=float(i % 4 == 0),
+                      solved_steps=i % 7, length=50, dropped=i % 5 == 0, effort=0.1, direction="ccw", start_phase=0.0)
+        for i in range(150))
+    assert main(["--status", str(tmp_path / "run"), "--json", str(tmp_path / "status.json")]) == 0
+    expected = (f"{tmp_path / 'run'}: no checkpoint yet (the first at 90,000 env steps); its episode log: 150 "
+                "episodes up to env step 9,600, stage 1 (easy); the last 100: score 0.250, 20% dropped, "
+                "median solved steps 3")
+    assert capsys.readouterr().out == expected + "\n"
+    assert json.loads((tmp_path / "status.json").read_text())["message"] == expected

@@ -86,9 +86,14 @@ def show_status(run_dir: Path, json_path: Path | None) -> int:
     import json
 
     from myo_sds.curricula.schema import ConfigError
-    from myo_sds.evaluation.summary import format_summary, summarize
+    from myo_sds.evaluation.summary import before_first_checkpoint, format_summary, summarize
 
     try:
+        if (early := before_first_checkpoint(run_dir)) is not None:
+            if json_path is not None:
+                json_path.write_text(json.dumps({"run_dir": str(run_dir), "status": "no checkpoint yet",
+                                                 "message": early}, indent=2))
+            return _print(early)
         summary = summarize(run_dir)
     except (ConfigError, FileNotFoundError) as error:
         print(f"error: {error}", file=sys.stderr)

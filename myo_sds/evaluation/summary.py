@@ -20,6 +20,7 @@ from myo_sds.run_folder import EpisodeRecord, RunFolder
 
 TREND_POINTS = 5  # measured values shown across the current stage
 BREAKDOWN_EPISODES = 2000  # the current stage's latest episodes, split by start phase
+WINDOW_BEFORE_CHECKPOINT = 100  # episodes shown for a run without a checkpoint yet
 
 
 @dataclass
@@ -131,6 +132,27 @@ def summarize(run_dir: str | Path) -> RunSummary:
     return RunSummary(str(folder.path), state.status.value, state.num_timesteps, state.wall_s, stages, saved_at,
                       _action_std(folder), TASK_SPECS[curriculum.task].start_phase_name,
                       recent_update_sizes(folder.tensorboard_dir))
+
+
+def before_first_checkpoint(run_dir: str | Path) -> str | None:
+    """What ``--status`` says of a run that has no checkpoint yet (nothing to summarize): when the
+    first comes and what its episode log shows so far. None for a folder with a checkpoint."""
+    from myo_sds.curricula.schema import load_run_config
+
+    folder = RunFolder(run_dir)
+    if not folder.path.is_dir() or folder.read_state() is not None or not folder.config_file.is_file():
+        return None
+    config = load_run_config(folder.config_file)
+    text = f"{folder.path}: no checkpoint yet (the first at {config.checkpoint_every:,} env steps)"
+    records = folder.read_episodes()
+    if not records:
+        return text + "; no episode has ended yet"
+    last, recent = records[-1], records[-WINDOW_BEFORE_CHECKPOINT:]
+    stage = config.curriculum.stages[last.stage_index].name
+    return (f"{text}; its episode log: {len(records):,} episodes up to env step {last.step:,}, stage "
+            f"{last.stage_index + 1} ({stage}); the last {len(recent)}: score {np.mean([r.score for r in recent]):.3f}, "
+            f"{np.mean([r.dropped for r in recent]):.0%} dropped, median solved steps "
+            f"{np.median([r.solved_steps for r in recent]):.0f}")
 
 
 def rest_starts(records: list[EpisodeRecord]) -> dict[str, dict[str, Any]]:
