@@ -27,7 +27,13 @@ def stage_start(run: Path, stage: str) -> int:
     state = json.loads(state_file.read_text())
     names = [h["stage"] for h in state["history"]]
     if stage not in names:
-        return state["stage_start_step"] if state["history"] else 0
+        # The current stage, or one begun after the newest checkpoint (the state file is older
+        # than the logs): the last step logged under another stage before this one's first.
+        logged = pd.concat([pd.read_csv(run / name, usecols=["step", "stage"])
+                            for name in ("episodes.csv", "evaluations.csv") if (run / name).is_file()])
+        first = logged[logged.stage == stage].step.min()
+        before = logged[(logged.stage != stage) & (logged.step <= first)].step
+        return max(state["stage_start_step"] if state["history"] else 0, int(before.max()) if len(before) else 0)
     index = names.index(stage)
     return 0 if index == 0 else state["history"][index - 1]["at_step"]
 
@@ -36,11 +42,14 @@ def table(run: Path, stage: str, bin_steps: int) -> pd.DataFrame:
     start = stage_start(run, stage)
     evaluations = pd.read_csv(run / "evaluations.csv")
     evaluations = evaluations[(evaluations.stage == stage) & (evaluations.kind == "periodic")]
+    evaluations = evaluations.assign(bin=(evaluations.step - start) // bin_steps)
+    rows = {"eval return": evaluations.groupby("bin").reward.mean(), "eval score": evaluations.groupby("bin").score.mean()}
+    if not (run / "episodes.csv").is_file():  # a resumable export carries no episode log
+        return pd.DataFrame(rows)
     episodes = pd.read_csv(run / "episodes.csv")
     episodes = episodes[episodes.stage == stage]
-    evaluations = evaluations.assign(bin=(evaluations.step - start) // bin_steps)
     episodes = episodes.assign(bin=(episodes.step - start) // bin_steps)
-    rows = {"eval return": evaluations.groupby("bin").reward.mean()}
+    rows["training score"] = episodes.groupby("bin").score.mean()
     for start_kind in ("on_targets", "rest"):
         of_kind = episodes[episodes.start == start_kind]
         rows[f"{start_kind} score"] = of_kind.groupby("bin").score.mean()
@@ -55,6 +64,9 @@ def main() -> None:
     parser.add_argument("--bin", type=int, default=200_000, help="env steps of the stage per row")
     args = parser.parse_args()
     for run in args.runs:
+        if not (run.expanduser() / "evaluations.csv").is_file():
+            print(f"{run.name}: no evaluation yet\n")
+            continue
         frame = table(run.expanduser(), args.stage, args.bin)
         frame.index = [f"{b * args.bin / 1e6:.1f}-{(b + 1) * args.bin / 1e6:.1f}M" for b in frame.index]
         print(f"{run.name}, {args.stage}:")
