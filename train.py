@@ -7,7 +7,10 @@
 import sys
 
 try:
-    from myo_sds.cli.train import main
+    from myo_sds.cli import sigint_held  # the standard library only
+
+    with sigint_held():  # a Ctrl-C inside an import can be lost; this one acts after it
+        from myo_sds.cli.train import main
 except KeyboardInterrupt:  # Ctrl-C while Python starts: nothing began
     sys.exit(130)
 

@@ -528,17 +528,19 @@ def test_an_evaluation_metric_needs_the_stage_evaluation_and_a_probe_a_known_env
 
 @pytest.mark.slow  # real processes and signals
 def test_ctrl_c_at_any_moment_leaves_a_resumable_run_or_none(tmp_path):
-    """From the first import to the first updates: no traceback, and the run folder is either
-    gone or holds a checkpoint that --resume accepts."""
+    """From the first import to the first updates: no traceback, the command stops, and the run
+    folder is either gone or holds a checkpoint that --resume accepts. The signals in the first
+    half second land while Python and NumPy load (a lost one left the run training)."""
     config = write_config(tmp_path, total=100_000)
     outcomes = []
-    for delay in (0.2, 1.0, 2.0, 3.0, 4.5, 7.0):
+    for delay in (0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 1.0, 2.0, 3.0, 4.5, 7.0):
         run = tmp_path / f"run-{delay}"
         process = run_train(["--config", str(config), "--run-dir", str(run), "--no-progress"], tmp_path)
         time.sleep(delay)
         process.send_signal(signal.SIGINT)
         output, _ = process.communicate(timeout=120)
-        assert "Traceback" not in output, output
+        # Python's own start (its site module) answers with a traceback before train.py's first line.
+        assert "Traceback" not in output or "<frozen site>" in output, output
         assert process.returncode in (130, 2) or (process.returncode == 1 and delay < 1), output
         if run.exists():
             folder = RunFolder(run)

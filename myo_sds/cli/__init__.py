@@ -15,7 +15,9 @@ def sigint_held() -> Iterator[None]:
     """Hold Ctrl-C while the compiled libraries (torch, MuJoCo) load, then act on it.
 
     A KeyboardInterrupt raised while a compiled module initializes surfaces as ``ImportError:
-    initialization failed`` with a traceback, not as a Ctrl-C the command lines can answer. Inside
+    initialization failed`` with a traceback (MuJoCo), or vanishes and the command goes on (seen
+    about once in 60 signals while NumPy loads); either way not as a Ctrl-C the command lines can
+    answer. Inside
     this block a SIGINT is only noted; on leaving, a noted one is raised as KeyboardInterrupt where
     Python's own handler was in place (a SIGINT that was ignored stays ignored)."""
     received: list[int] = []

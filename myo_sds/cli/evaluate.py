@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from myo_sds import set_process_environment
+from myo_sds.cli import sigint_held
 
 
 def _noise_list(text: str) -> list[float]:
@@ -104,12 +105,12 @@ def _run_comparison(ev, refs, folder: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    set_process_environment()  # before NumPy, torch and MuJoCo load (headless rendering too)
-    args = parse_args(argv)
-    from myo_sds.cli import sigint_held
-
     try:
+        # A Ctrl-C while the compiled libraries load is answered once they have: raised inside a
+        # compiled module's initialization it can vanish or end in an ImportError.
         with sigint_held():
+            set_process_environment()  # before NumPy, torch and MuJoCo load (headless rendering too)
+            args = parse_args(argv)
             import mujoco  # noqa: F401  (the envs import it when the first is built)
 
             from myo_sds import evaluation as ev

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from myo_sds import bundled_path, set_process_environment
+from myo_sds.cli import sigint_held
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -139,7 +140,7 @@ def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool)
 
 def _left_behind(trainer, args) -> str:
     """What an interrupted start or resume leaves: a new run without a checkpoint is removed."""
-    if args.resume:
+    if args is not None and args.resume:
         return f"the run is as its last checkpoint left it; continue with `python train.py --resume {args.resume}`"
     if trainer is None:
         return "before the first step; no run folder was kept"
@@ -150,18 +151,20 @@ def _left_behind(trainer, args) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    set_process_environment()  # before NumPy, torch and MuJoCo load
-    args = parse_args(argv)
-    if args.background:  # before any thread starts: threads inherit the class
-        from myo_sds.threads import run_at_idle_priority
-
-        try:
-            run_at_idle_priority()
-        except OSError as error:
-            print(f"error: {error}", file=sys.stderr)
-            return 2
     started: list = []  # the trainer, once made
+    args = None
     try:
+        with sigint_held():  # the standard library's compiled modules load here
+            set_process_environment()  # before NumPy, torch and MuJoCo load
+            args = parse_args(argv)
+        if args.background:  # before any thread starts: threads inherit the class
+            from myo_sds.threads import run_at_idle_priority
+
+            try:
+                run_at_idle_priority()
+            except OSError as error:
+                print(f"error: {error}", file=sys.stderr)
+                return 2
         return _main(args, started)
     except KeyboardInterrupt:
         # Before the run's own handler was in place (or a second Ctrl-C): say what is left.
@@ -174,25 +177,25 @@ def _main(args: argparse.Namespace, started: list) -> int:
         return show_status(args.status, args.json)
     if args.export:
         return export(args.export, args.to, args.load_checkpoint, args.resumable)
-    from myo_sds.curricula.schema import ConfigError, load_run_config
-    from myo_sds.run_folder import RunFolder
-
-    try:
-        # Check the config before torch and MuJoCo load, so a typo is reported at once.
-        if args.resume:
-            load_run_config(RunFolder.require(args.resume).config_file)
-        else:
-            config = load_run_config(args.config, tuple(args.overrides))
-    except (ConfigError, FileNotFoundError) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    if args.print_config:
-        from myo_sds.config_report import format_config
-
-        return _print(format_config(config))
-    from myo_sds.cli import sigint_held
-
+    # A Ctrl-C while NumPy (the config's), MuJoCo and torch load is answered once they have: raised
+    # inside a compiled module's initialization it can vanish or end in an ImportError.
     with sigint_held():
+        from myo_sds.curricula.schema import ConfigError, load_run_config
+        from myo_sds.run_folder import RunFolder
+
+        try:
+            # Check the config before torch and MuJoCo load, so a typo is reported at once.
+            if args.resume:
+                load_run_config(RunFolder.require(args.resume).config_file)
+            else:
+                config = load_run_config(args.config, tuple(args.overrides))
+        except (ConfigError, FileNotFoundError) as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        if args.print_config:
+            from myo_sds.config_report import format_config
+
+            return _print(format_config(config))
         import mujoco  # noqa: F401  (the envs import it when the first is built)
 
         from myo_sds.curricula.state import RunStatus
