@@ -6,6 +6,10 @@ episodes on the stage's own task, the same seeds in every run) and the training 
 and drop rate, placed on the targets and at rest.
 
     python experiments/compare_stage.py rotate-20s ~/runs/baoding_sds-s0 ~/runs/rotate20_lr3e-5-s0
+    python experiments/compare_stage.py fixed-10s ~/runs/baoding_sds-s0 ~/runs/branch@fixed-10s-again --by-direction
+
+``RUN@STAGE`` compares another stage of that run (a branch that renamed the stage); with
+``--by-direction`` the training episodes' score, drop rate and median solved steps per direction.
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ def stage_start(run: Path, stage: str) -> int:
     return 0 if index == 0 else state["history"][index - 1]["at_step"]
 
 
-def table(run: Path, stage: str, bin_steps: int) -> pd.DataFrame:
+def table(run: Path, stage: str, bin_steps: int, by_direction: bool = False) -> pd.DataFrame:
     start = stage_start(run, stage)
     evaluations = pd.read_csv(run / "evaluations.csv")
     evaluations = evaluations[(evaluations.stage == stage) & (evaluations.kind == "periodic")]
@@ -54,22 +58,31 @@ def table(run: Path, stage: str, bin_steps: int) -> pd.DataFrame:
         of_kind = episodes[episodes.start == start_kind]
         rows[f"{start_kind} score"] = of_kind.groupby("bin").score.mean()
         rows[f"{start_kind} dropped"] = of_kind.groupby("bin").dropped.mean()
+    for direction in sorted(episodes.direction.unique()) if by_direction else ():
+        of_direction = episodes[episodes.direction == direction].groupby("bin")
+        rows[f"{direction} score"] = of_direction.score.mean()
+        rows[f"{direction} dropped"] = of_direction.dropped.mean()
+        rows[f"{direction} median solved"] = of_direction.solved_steps.median()
     return pd.DataFrame(rows)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("stage")
-    parser.add_argument("runs", nargs="+", type=Path)
+    parser.add_argument("runs", nargs="+", help="run folders; RUN@STAGE for another stage of that run")
     parser.add_argument("--bin", type=int, default=200_000, help="env steps of the stage per row")
+    parser.add_argument("--by-direction", action="store_true", help="training episodes per direction too")
     args = parser.parse_args()
-    for run in args.runs:
-        if not (run.expanduser() / "evaluations.csv").is_file():
+    pd.set_option("display.width", 250)
+    for spec in args.runs:
+        folder, _, stage = spec.partition("@")
+        run, stage = Path(folder).expanduser(), stage or args.stage
+        if not (run / "evaluations.csv").is_file():
             print(f"{run.name}: no evaluation yet\n")
             continue
-        frame = table(run.expanduser(), args.stage, args.bin)
-        frame.index = [f"{b * args.bin / 1e6:.1f}-{(b + 1) * args.bin / 1e6:.1f}M" for b in frame.index]
-        print(f"{run.name}, {args.stage}:")
+        frame = table(run, stage, args.bin, args.by_direction)
+        frame.index = [f"{b * args.bin / 1e6:g}-{(b + 1) * args.bin / 1e6:g}M" for b in frame.index]
+        print(f"{run.name}, {stage}:")
         print(frame.round(2).to_string(na_rep="-"))
         print(f"  best evaluation {np.nanmax(frame['eval return']):.0f} (bin mean)\n")
 
