@@ -16,10 +16,9 @@ def sigint_held() -> Iterator[None]:
 
     A KeyboardInterrupt raised while a compiled module initializes surfaces as ``ImportError:
     initialization failed`` with a traceback (MuJoCo), or vanishes and the command goes on (seen
-    about once in 60 signals while NumPy loads); either way not as a Ctrl-C the command lines can
-    answer. Inside
-    this block a SIGINT is only noted; on leaving, a noted one is raised as KeyboardInterrupt where
-    Python's own handler was in place (a SIGINT that was ignored stays ignored)."""
+    about once in 60 signals while NumPy loads). Inside this block a SIGINT is only noted; on
+    leaving, a noted one is raised as KeyboardInterrupt where Python's own handler was in place
+    (a SIGINT that was ignored stays ignored)."""
     received: list[int] = []
     previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
     try:

@@ -106,9 +106,7 @@ def _run_comparison(ev, refs, folder: Path) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     try:
-        # A Ctrl-C while the compiled libraries load is answered once they have: raised inside a
-        # compiled module's initialization it can vanish or end in an ImportError.
-        with sigint_held():
+        with sigint_held():  # NumPy, MuJoCo and torch load here
             set_process_environment()  # before NumPy, torch and MuJoCo load (headless rendering too)
             args = parse_args(argv)
             import mujoco  # noqa: F401  (the envs import it when the first is built)

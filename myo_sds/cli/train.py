@@ -177,9 +177,7 @@ def _main(args: argparse.Namespace, started: list) -> int:
         return show_status(args.status, args.json)
     if args.export:
         return export(args.export, args.to, args.load_checkpoint, args.resumable)
-    # A Ctrl-C while NumPy (the config's), MuJoCo and torch load is answered once they have: raised
-    # inside a compiled module's initialization it can vanish or end in an ImportError.
-    with sigint_held():
+    with sigint_held():  # NumPy (the config's), MuJoCo and torch load here
         from myo_sds.curricula.schema import ConfigError, load_run_config
         from myo_sds.run_folder import RunFolder
 
