@@ -72,7 +72,8 @@ SELECTIONS = ("score", "reward")
 class StageEvaluation:
     """Deterministic episodes every ``every`` env steps of the stage, as the 2022 winner's
     EvalCallback: ``episodes`` episodes (seeds 0 .. episodes-1, the same at every evaluation) on
-    ``env`` (``stage``: the stage's own task; or a preset, e.g. ``p1_2022``), each hand joint moved
+    ``env`` (``stage``: the stage's own task; ``stage:NAME``: another stage's, e.g. the task a
+    practice stage is for; or a preset, e.g. ``p1_2022``), each hand joint moved
     by U(-``start_noise``, ``start_noise``) at reset. The policy of the best mean score (or return,
     ``select: reward``, as the winner's EvalCallback chose) is kept; with ``hand_off: best`` the next
     stage starts from it (weights, optimizer and normalization statistics of that step), with
@@ -80,7 +81,8 @@ class StageEvaluation:
 
     every: int = setting(MISSING, parse=integer(low=1), help="env steps between evaluations, e.g. 250000")
     episodes: int = setting(10, parse=integer(low=1), help="deterministic episodes per evaluation")
-    env: str = setting("stage", parse=text, help="stage (the stage's own task) or a preset, e.g. p1_2022")
+    env: str = setting("stage", parse=text,
+                       help="stage (the stage's own task), stage:NAME (another stage's) or a preset, e.g. p1_2022")
     start_noise: float = setting(0.0, parse=number(low=0), help="rad: each hand joint moved by up to this at reset")
     hand_off: str = setting("best", parse=one_of(*HAND_OFFS), help="best | last: the policy the next stage starts from")
     select: str = setting("score", parse=one_of(*SELECTIONS),
@@ -196,9 +198,6 @@ def _stage_evaluation(reader: YamlReader, key: str, task: str, raw: Any) -> Stag
     if raw is None:
         return None
     evaluation = read_settings(reader, key, raw, StageEvaluation)
-    presets = TASK_SPECS[task].knobs.PRESETS
-    if evaluation.env != "stage" and evaluation.env not in presets:
-        raise reader.error(f"{key}.env", f"{evaluation.env!r} is not one of stage, {', '.join(presets)}")
     if evaluation.start_noise and not TASK_SPECS[task].hand_joints:
         raise reader.error(f"{key}.start_noise", f"the {task} task declares no hand joints to move")
     return evaluation
@@ -216,15 +215,24 @@ def _probe(reader: YamlReader, task: str, raw: Any, stage_names: tuple[str, ...]
     if raw is None:
         return None
     probe = read_settings(reader, "probe", raw, StageEndProbe)
-    presets = TASK_SPECS[task].knobs.PRESETS
-    if probe.env.startswith("stage:"):
-        if probe.env[len("stage:"):] not in stage_names:
-            raise reader.error("probe.env", f"no stage named {probe.env[len('stage:'):]!r}; stages: {', '.join(stage_names)}")
-    elif probe.env not in presets:
-        raise reader.error("probe.env", f"{probe.env!r} is not stage:NAME or one of {', '.join(presets)}")
+    _check_evaluation_env(reader, "probe.env", probe.env, task, stage_names, own_stage=False)
     if probe.start_noise and not TASK_SPECS[task].hand_joints:
         raise reader.error("probe.start_noise", f"the {task} task declares no hand joints to move")
     return probe
+
+
+def _check_evaluation_env(reader: YamlReader, key: str, env: str, task: str, stage_names: tuple[str, ...],
+                          *, own_stage: bool) -> None:
+    """An evaluation's env is ``stage:NAME`` (a stage of this curriculum), a preset of the task, or,
+    where there is an own stage (``own_stage``), ``stage``."""
+    if env.startswith("stage:"):
+        if env[len("stage:"):] not in stage_names:
+            raise reader.error(key, f"no stage named {env[len('stage:'):]!r}; stages: {', '.join(stage_names)}")
+        return
+    presets = tuple(TASK_SPECS[task].knobs.PRESETS)
+    if env not in presets and not (own_stage and env == "stage"):
+        allowed = ("stage", "stage:NAME") if own_stage else ("stage:NAME",)
+        raise reader.error(key, f"{env!r} is not one of {', '.join(allowed + presets)}")
 
 
 CURRICULUM_SET_KEYS = ("defaults", "probe", "stages")  # what --set may change in a curriculum
@@ -252,7 +260,7 @@ def load_curriculum(path: str | Path, overrides: tuple[str, ...] = ()) -> Curric
     stages_raw = raw.get("stages")
     if not isinstance(stages_raw, list) or not stages_raw:
         raise reader.error("stages", "expected a non-empty list of stages")
-    stages, seen = [], set()
+    stages, seen, stage_keys = [], set(), []
     for index, stage_raw in enumerate(stages_raw):
         key = stage_label(index)  # stages count from 1, as on the console
         stage_raw = reader.mapping(key, stage_raw, STAGE_KEYS)
@@ -264,7 +272,13 @@ def load_curriculum(path: str | Path, overrides: tuple[str, ...] = ()) -> Curric
         # An error in a stage names the file that last wrote it (a base's, when inherited).
         stage_reader = reader.stage_reader(stage_name, key)
         stages.append(_stage(stage_reader, key, task, stage_name, stage_raw, defaults, reader))
-    probe = _probe(reader, task, raw.get("probe"), tuple(s.name for s in stages))
+        stage_keys.append((stage_reader, key))
+    stage_names = tuple(s.name for s in stages)
+    for stage, (stage_reader, key) in zip(stages, stage_keys):  # once every stage's name is known
+        if stage.evaluate is not None:
+            _check_evaluation_env(stage_reader, f"{key} evaluate.env", stage.evaluate.env, task, stage_names,
+                                  own_stage=True)
+    probe = _probe(reader, task, raw.get("probe"), stage_names)
     changed = bool(reader.origins or reader.overrides)
     if changed:
         raw["name"] = name

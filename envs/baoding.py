@@ -159,8 +159,13 @@ class BaodingEnv(MuscleHandEnv):
 
     def _next_goal(self, offset, rng: np.random.Generator) -> None:
         """The targets jump along their orbit by U(offset) rad (default +-45 degrees), keeping
-        their direction and period: the task's start angle moves by that much."""
-        shift = offset.sample(rng) if offset is not None else float(rng.uniform(-math.pi / 4, math.pi / 4))
+        their direction and period. The offset is measured along the direction of travel (positive:
+        ahead; clockwise flips its sign, hold keeps it as written), so one range sends cw and ccw
+        targets ahead of the balls, as static targets drawn ahead (AL4Muscles) need."""
+        if offset is None:
+            shift = float(rng.uniform(-math.pi / 4, math.pi / 4))
+        else:
+            shift = offset.sample(rng) * (-1.0 if self.task.direction == "cw" else 1.0)
         self.task = replace(self.task, start_angle=float((self.task.start_angle + shift) % (2 * np.pi)))
         self._place_targets(self._counter)
 

@@ -178,7 +178,8 @@ class BaodingKnobs(TaskKnobs):
     recorded_start: RecordedStart | None = recorded_start_setting(
         "the targets are placed on the balls (plus start_offset), with the stage's direction and period")
     goal_chain: GoalChain | None = goal_chain_setting(
-        "U(-0.785, 0.785) rad: the targets jump up to 45 degrees along their orbit, direction and period kept")
+        "U(-0.785, 0.785) rad: the targets jump up to 45 degrees along their orbit, direction and period kept; "
+        "a written offset is along the direction of travel (positive: ahead; cw flips its sign)")
     ball_size: Range | None = setting(None, parse=optional(ranged(positive=True)),
                                    help="m, ball radius: null (model's 0.022), a value, or [min, max]")
     ball_mass: Range | None = setting(None, parse=optional(ranged(positive=True)),

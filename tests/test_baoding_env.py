@@ -565,11 +565,12 @@ def test_episode_result_says_how_the_episode_began_and_sums_its_reward():
     assert kinds == {"on_targets", "rest"}
 
 
-def test_chained_goals_move_the_targets_along_their_orbit():
-    """After 3 solved steps the targets jump by U(offset) along the orbit (direction and period
-    kept), seeded; the official presets chain nothing."""
+@pytest.mark.parametrize("direction, sign", [("ccw", 1.0), ("cw", -1.0)])
+def test_chained_goals_move_the_targets_along_their_orbit(direction, sign):
+    """After 3 solved steps the targets jump by U(offset) ahead along the orbit (clockwise:
+    the angle falls), direction and period kept, seeded; the official presets chain nothing."""
     def play(seed):
-        env = BaodingEnv(direction="ccw", period=20.0, start_angle="uniform", rsi_probability=1.0,
+        env = BaodingEnv(direction=direction, period=20.0, start_angle="uniform", rsi_probability=1.0,
                          solved_radius=0.05, goal_chain={"after_solved": 3, "offset": [0.2, 0.4]}, horizon=10)
         env.reset(seed=seed)
         starts = [env.task.start_angle]
@@ -581,13 +582,13 @@ def test_chained_goals_move_the_targets_along_their_orbit():
     env, starts, obs, info = play(0)
     jumps = np.diff(np.unwrap(starts))
     moved = np.flatnonzero(jumps)
-    assert list(moved[:1]) == [2] and all(0.2 <= j <= 0.4 for j in jumps[moved])  # the third solved step
-    assert (env.task.direction, env.task.period) == ("ccw", 20.0)
+    assert list(moved[:1]) == [2] and all(0.2 <= sign * j <= 0.4 for j in jumps[moved])  # the third solved step
+    assert (env.task.direction, env.task.period) == (direction, 20.0)
     # The observation shows the targets where the moved task puts them.
     angle = env._target_angle
     target = env.data.site_xpos[env.model.site("target1_site").id]
     np.testing.assert_allclose(obs[35:38], target, atol=1e-6)
-    assert angle == pytest.approx(starts[-1] + 2 * math.pi * 9 * env.dt / 20.0)  # placed before the 10th step
+    assert angle == pytest.approx(starts[-1] + sign * 2 * math.pi * 9 * env.dt / 20.0)  # placed before the 10th step
     assert info["episode_result"].goals_reached == len(moved)
     _, again, _, _ = play(0)
     np.testing.assert_array_equal(starts, again)

@@ -393,7 +393,8 @@ def test_a_stage_evaluates_periodically_and_hands_its_best_policy_to_the_next(tm
 
 def test_a_stage_evaluation_is_checked_when_read(tmp_path, capsys):
     for written, message in (("{episodes: 3}", "every: missing"),
-                             ("{every: 256, env: p3}", "'p3' is not one of stage, p1, p1_2022, p2"),
+                             ("{every: 256, env: p3}", "'p3' is not one of stage, stage:NAME, p1, p1_2022, p2"),
+                             ("{every: 256, env: 'stage:nope'}", "evaluate.env: no stage named 'nope'; stages: easy, hard"),
                              ("{every: 256, hand_off: first}", "hand_off")):
         curriculum = CURRICULUM.replace("advance: {metric: score, threshold: 0.01, window: 8}",
                                         "advance: {metric: score, threshold: 0.01, window: 8}\n"
@@ -460,7 +461,8 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
         "    evaluate: {every: 128, episodes: 2, env: stage, select: reward}").replace(
         "env: {direction: ccw, period: 20}", "env: {direction: random, period: 20, rsi_probability: 0.5}").replace(
         "advance: {metric: score, threshold: 0.9, window: 8}",
-        "advance: {metric: eval_reward, threshold: 5000, window: 8}\n    evaluate: {every: 256, episodes: 1}")
+        "advance: {metric: eval_reward, threshold: 5000, window: 8}\n"
+        "    evaluate: {every: 256, episodes: 1, env: 'stage:easy'}")  # judged on another stage's task
     run = tmp_path / "run"
     state = CurriculumTrainer.start(write_config(tmp_path, total=640, curriculum=curriculum),
                                     run_dir=run, progress=False).run()
@@ -473,6 +475,7 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
     assert periodic[0].reward >= 1 and periodic[0].best and easy.best_evaluated_reward == periodic[0].reward
     probes = [e for e in evaluations if e.kind == "probe"]
     assert [(p.stage, p.env, p.episodes, p.step) for p in probes] == [("easy", "stage:hard", 6, 128)]
+    assert {(e.env, e.episodes) for e in evaluations if e.stage == "hard"} == {("stage:easy", 1)}
     by_direction = easy.probe.pop("by_direction")
     assert easy.probe.pop("env") == "stage:hard"
     assert easy.probe == pytest.approx({"episodes": 6, "score": probes[0].score, "reward": probes[0].reward,
@@ -520,7 +523,7 @@ def test_an_evaluation_metric_needs_the_stage_evaluation_and_a_probe_a_known_env
             ("advance: {metric: score, threshold: 0.01, window: 8}", "advance: {metric: eval_score, threshold: 2}",
              "advance.threshold: must be in \\[0, 1\\] for eval_score"),
             ("stages:", "probe: {env: 'stage:nope'}\nstages:", "probe.env: no stage named 'nope'; stages: easy, hard"),
-            ("stages:", "probe: {env: p3}\nstages:", "probe.env: 'p3' is not stage:NAME or one of p1, p1_2022, p2")):
+            ("stages:", "probe: {env: p3}\nstages:", "probe.env: 'p3' is not one of stage:NAME, p1, p1_2022, p2")):
         with pytest.raises(ConfigError, match=message):
             CurriculumTrainer.start(write_config(tmp_path, total=256, curriculum=CURRICULUM.replace(old, new)),
                                     run_dir=tmp_path / "bad", overwrite=True, progress=False)
