@@ -9,7 +9,8 @@ and drop rate, placed on the targets and at rest.
     python experiments/compare_stage.py fixed-10s ~/runs/baoding_sds-s0 ~/runs/branch@fixed-10s-again --by-direction
 
 ``RUN@STAGE`` compares another stage of that run (a branch that renamed the stage); with
-``--by-direction`` the training episodes' score, drop rate and median solved steps per direction.
+``--by-direction`` the training episodes' score, drop rate and median solved steps per direction
+(and, with chained goals, the mean number of goals reached).
 """
 
 from __future__ import annotations
@@ -54,8 +55,10 @@ def table(run: Path, stage: str, bin_steps: int, by_direction: bool = False) -> 
     episodes = episodes[episodes.stage == stage]
     episodes = episodes.assign(bin=(episodes.step - start) // bin_steps)
     rows["training score"] = episodes.groupby("bin").score.mean()
-    for start_kind in ("on_targets", "rest"):
+    for start_kind in ("on_targets", "rest", "recorded"):
         of_kind = episodes[episodes.start == start_kind]
+        if of_kind.empty:
+            continue
         rows[f"{start_kind} score"] = of_kind.groupby("bin").score.mean()
         rows[f"{start_kind} dropped"] = of_kind.groupby("bin").dropped.mean()
     for direction in sorted(episodes.direction.unique()) if by_direction else ():
@@ -63,6 +66,8 @@ def table(run: Path, stage: str, bin_steps: int, by_direction: bool = False) -> 
         rows[f"{direction} score"] = of_direction.score.mean()
         rows[f"{direction} dropped"] = of_direction.dropped.mean()
         rows[f"{direction} median solved"] = of_direction.solved_steps.median()
+        if "goals" in episodes and episodes.goals.notna().any():  # chained goals: the mean number reached
+            rows[f"{direction} goals"] = of_direction.goals.mean()
     return pd.DataFrame(rows)
 
 
