@@ -223,14 +223,11 @@ def _probe(reader: YamlReader, task: str, raw: Any, stage_names: tuple[str, ...]
 
 def _check_evaluation_env(reader: YamlReader, key: str, env: str, task: str, stage_names: tuple[str, ...],
                           *, own_stage: bool) -> None:
-    """An evaluation's env is ``stage:NAME`` (a stage of this curriculum), a preset of the task, or,
-    where there is an own stage (``own_stage``), ``stage``."""
-    if env.startswith("stage:"):
-        if env[len("stage:"):] not in stage_names:
-            raise reader.error(key, f"no stage named {env[len('stage:'):]!r}; stages: {', '.join(stage_names)}")
-        return
+    """An evaluation's env: ``stage:NAME`` (a stage of this curriculum), a preset, or ``stage`` (``own_stage``)."""
+    if env.startswith("stage:") and env[len("stage:"):] not in stage_names:
+        raise reader.error(key, f"no stage named {env[len('stage:'):]!r}; stages: {', '.join(stage_names)}")
     presets = tuple(TASK_SPECS[task].knobs.PRESETS)
-    if env not in presets and not (own_stage and env == "stage"):
+    if not env.startswith("stage:") and env not in presets and not (own_stage and env == "stage"):
         allowed = ("stage", "stage:NAME") if own_stage else ("stage:NAME",)
         raise reader.error(key, f"{env!r} is not one of {', '.join(allowed + presets)}")
 
@@ -276,8 +273,7 @@ def load_curriculum(path: str | Path, overrides: tuple[str, ...] = ()) -> Curric
     stage_names = tuple(s.name for s in stages)
     for stage, (stage_reader, key) in zip(stages, stage_keys):  # once every stage's name is known
         if stage.evaluate is not None:
-            _check_evaluation_env(stage_reader, f"{key} evaluate.env", stage.evaluate.env, task, stage_names,
-                                  own_stage=True)
+            _check_evaluation_env(stage_reader, f"{key} evaluate.env", stage.evaluate.env, task, stage_names, own_stage=True)
     probe = _probe(reader, task, raw.get("probe"), stage_names)
     changed = bool(reader.origins or reader.overrides)
     if changed:
