@@ -198,4 +198,5 @@ class DieEnv(MuscleHandEnv):
             "sparse": -rot_dist - 10.0 * pos_dist,
             "solved": float(solved),
             "done": float(dropped),
+            "alive": float(not dropped),
         }

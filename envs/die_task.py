@@ -36,9 +36,11 @@ FRAME_SKIP = 5
 N_HAND_JOINTS = 23
 # The official terms, then shaping terms of 2022 entries (PKU-MARL): the rotation error through a
 # bounded kernel w / (d^2 + w) (1 on the goal, half at d = sqrt(w)), the summed fingertip-to-die
-# distance and the die's speed (both negative). ``solved`` weighted is a bonus per solved step.
+# distance and the die's speed (both negative). ``solved`` weighted is a bonus per solved step;
+# ``alive`` is 1 on every step the die is held: with negative distance terms alone, dropping the
+# die ends their stream and pays (experiments/RESULTS.md, session of 2026-12-07 (II)).
 REWARD_TERMS = ("pos_dist", "rot_dist", "bonus", "act_reg", "penalty", "sparse", "solved", "done",
-                "rot_kernel", "tip_dist", "die_speed")
+                "rot_kernel", "tip_dist", "die_speed", "alive")
 
 
 # Features of the simulation the official observation leaves out, by name: (size, meaning); a

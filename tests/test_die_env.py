@@ -246,6 +246,25 @@ def test_shaping_terms_match_hand_computed_values_and_leave_the_score_alone():
             break
 
 
+def test_alive_is_one_on_each_step_the_die_is_held_and_zero_on_the_drop():
+    """alive = 1 while the die is within drop_threshold of the goal, 0 on the step it is dropped
+    (the episode ends there); a tight threshold makes the hand drop it within a few steps."""
+    weights = {"alive": 2.0, "rot_dist": 1.0}
+    env = DieEnv(goal_position=0.0, drop_threshold=0.004, reward_weights=weights)
+    env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    alive = []
+    for _ in range(150):
+        obs, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, 39))
+        held = np.linalg.norm(obs[51:54]) <= 0.004
+        assert info["alive"] == float(held)
+        assert reward == pytest.approx(2.0 * info["alive"] - np.linalg.norm(obs[60:63]))
+        alive.append(info["alive"])
+        if terminated or truncated:
+            break
+    assert terminated and alive[-1] == 0.0 and len(alive) > 1 and all(a == 1.0 for a in alive[:-1])
+
+
 def test_chained_goals_turn_the_goal_on_from_the_current_one_and_count_the_goals_reached():
     """After 2 solved steps the goal turns by a random rotation composed onto the current one (a
     goal on the resting die is solved at once, so the chain starts at step 2), seeded; the
