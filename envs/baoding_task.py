@@ -195,6 +195,10 @@ class BaodingKnobs(TaskKnobs):
     episode_steps: int | None = setting(None, parse=optional(count()),
                                      help="control steps per episode: null (the official 200) or a count, e.g. 400 for "
                                           "two 5 s orbits; the score stays solved steps over this count")
+    muscle_curve: str = setting("mujoco", parse=choice("mujoco", "2.1.0"),
+                                help="'mujoco' (this MuJoCo's muscles, as MyoSuite runs them) or '2.1.0': add MuJoCo "
+                                     "2.1.0's length curve, under which an over-shortened muscle pushes (the 2022 "
+                                     "challenge's simulator; up to ~75 N on RI2 and RI5)")
     reward_weights: Mapping[str, float] = setting(
         default_factory=lambda: {"pos_dist_1": 5.0, "pos_dist_2": 5.0}, parse=weights(REWARD_TERMS),
         help=f"mapping term -> weight over {', '.join(REWARD_TERMS)}")

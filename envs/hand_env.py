@@ -18,6 +18,7 @@ import numpy as np
 from myo_sds.envs.assets import load_hand_model
 from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs, check_known
 from myo_sds.envs.metrics import PHASE_SECTORS, EpisodeResult, phase_sector
+from myo_sds.envs.muscle_2022 import MuscleCurve2022
 from myo_sds.envs.state_bank import StateBank
 
 _INSTABILITY_WARNINGS = np.array([mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
@@ -100,6 +101,7 @@ class MuscleHandEnv(gym.Env):
         self.state_bank: StateBank | None = None  # states of earlier episodes (``recorded_start`` knob)
         self.recorded_start = False  # whether this episode began from a banked state
         self._renderer: mujoco.Renderer | None = None
+        self._muscle_curve_2022: MuscleCurve2022 | None = None  # built on first use
         self._camera = mujoco.MjvCamera()
 
     # -- to implement ---------------------------------------------------------------------
@@ -158,8 +160,7 @@ class MuscleHandEnv(gym.Env):
         return "recorded" if self.recorded_start else None
 
     def _episode_horizon(self) -> int:
-        """Control steps before truncation this episode: the task's ``episode_steps`` knob, if it
-        has one and it is set, else the constructor's horizon."""
+        """Control steps before truncation: the task's ``episode_steps`` knob if set, else the horizon."""
         return getattr(self.knobs, "episode_steps", None) or self.horizon
 
     def _goal_phase(self) -> float | None:
@@ -240,6 +241,14 @@ class MuscleHandEnv(gym.Env):
         mujoco.mj_forward(self.model, self.data)
         return self._observation()
 
+    def _substeps(self) -> None:
+        """``FRAME_SKIP`` physics steps, with MuJoCo 2.1.0's muscles where the ``muscle_curve`` knob asks."""
+        if getattr(self.knobs, "muscle_curve", "mujoco") == "2.1.0":
+            self._muscle_curve_2022 = self._muscle_curve_2022 or MuscleCurve2022(self.model)
+            self._muscle_curve_2022.step(self.model, self.data, self.FRAME_SKIP)
+        else:
+            mujoco.mj_step(self.model, self.data, self.FRAME_SKIP)
+
     def _recorded_start_knob(self):
         return getattr(self.knobs, "recorded_start", None)
 
@@ -277,7 +286,7 @@ class MuscleHandEnv(gym.Env):
         model, data = self.model, self.data
         self._before_physics()
         data.ctrl[:] = 1.0 / (1.0 + np.exp(-5.0 * (action - 0.5)))  # official muscle mapping
-        mujoco.mj_step(model, data, self.FRAME_SKIP)
+        self._substeps()
         # Sites after mj_step lag the integrated state by one substep: refresh kinematics
         # only (all the observation needs) instead of a full mj_forward.
         mujoco.mj_kinematics(model, data)

@@ -51,6 +51,7 @@ import mujoco  # noqa: E402
 import myo_sds.envs.hand_env as hand_env  # noqa: E402
 from myo_sds.envs.assets import load_hand_model  # noqa: E402
 from myo_sds.envs.baoding import BaodingEnv  # noqa: E402
+from myo_sds.envs.muscle_2022 import MuscleCurve2022  # noqa: E402
 from myo_sds.evaluation.checkpoints import load_policy, resolve_checkpoint  # noqa: E402
 
 WHEELS = {"free-mujoco-py==2.1.6": "free_mujoco_py-2.1.6-py3-none-any.whl",
@@ -189,46 +190,12 @@ class Mujoco210:
 
 # --- MuJoCo 2.1.0's muscle length curve, added to ours -----------------------------------------
 
-def fl_210_excess(normalized_length: np.ndarray, lmin: np.ndarray) -> np.ndarray:
-    """2.1.0's length curve minus ours: at or below ``lmin`` 2.1.0 falls through to its
-    ``L <= 1`` branch, ``1 - (x^2)/2`` with ``x = (1-L)/(1-(lmin+1)/2)``, negative below ~0.65
-    of the optimum, where ours is 0."""
-    midpoint = 0.5 * (lmin + 1.0)
-    x = (1.0 - normalized_length) / np.maximum(1e-15, 1.0 - midpoint)
-    return np.where(normalized_length <= lmin, 1.0 - 0.5 * x * x, 0.0)
-
-
-def force_velocity(v: np.ndarray, fvmax: np.ndarray) -> np.ndarray:
-    y = fvmax - 1.0
-    return np.where(v <= -1, 0.0, np.where(v <= 0, (v + 1) ** 2,
-                    np.where(v <= y, fvmax - (y - v) ** 2 / np.maximum(1e-15, y), fvmax)))
-
-
 @contextlib.contextmanager
 def fl_210_in_ours(model: mujoco.MjModel) -> Iterator[None]:
-    """Add 2.1.0's extra muscle force (over-shortened muscles) to ``model``'s passive forces."""
-    muscles = np.flatnonzero(model.actuator_gaintype == mujoco.mjtGain.mjGAIN_MUSCLE)
-    prm = model.actuator_gainprm[muscles]
-    lengthrange = model.actuator_lengthrange[muscles]
-    optimum = (lengthrange[:, 1] - lengthrange[:, 0]) / np.maximum(1e-15, prm[:, 1] - prm[:, 0])
-    peak = prm[:, 2].copy()
-    scaled = peak < 0
-    peak[scaled] = prm[scaled, 3] / np.maximum(1e-15, model.actuator_acc0[muscles][scaled])
-    act_adr = model.actuator_actadr[muscles]
-
-    def passive(m: mujoco.MjModel, d: mujoco.MjData) -> None:
-        length = prm[:, 0] + (d.actuator_length[muscles] - lengthrange[:, 0]) / np.maximum(1e-15, optimum)
-        short = np.flatnonzero(length <= prm[:, 4])
-        if not len(short):
-            return
-        velocity = d.actuator_velocity[muscles] / np.maximum(1e-15, optimum * prm[:, 6])
-        extra = -peak * fl_210_excess(length, prm[:, 4]) * force_velocity(velocity, prm[:, 8]) * d.act[act_adr]
-        for k in short:
-            row = muscles[k]
-            adr, nnz = d.moment_rowadr[row], d.moment_rownnz[row]
-            d.qfrc_passive[d.moment_colind[adr:adr + nnz]] += d.actuator_moment[adr:adr + nnz] * extra[k]
-
-    mujoco.set_mjcb_passive(passive)
+    """Add 2.1.0's extra muscle force (over-shortened muscles) to ``model``'s passive forces
+    (the env knob ``muscle_curve: '2.1.0'`` does the same per env, through mj_step1/mj_step2)."""
+    curve = MuscleCurve2022(model)
+    mujoco.set_mjcb_passive(lambda m, d: curve.add_joint_force(d, d.qfrc_passive))
     try:
         yield
     finally:
