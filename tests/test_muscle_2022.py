@@ -74,7 +74,7 @@ def test_knob_applies_the_force_through_the_moment_arms_and_changes_the_motion()
     np.testing.assert_allclose(data.qfrc_applied, expected, rtol=1e-9, atol=1e-9)
     for env in envs.values():
         obs[env.knobs.muscle_curve] = env.step(action)[0]
-    assert envs["mujoco"].data.qfrc_applied.any() == False  # noqa: E712 (an array's any)
+    assert not envs["mujoco"].data.qfrc_applied.any()
     assert np.abs(obs["mujoco"] - obs["2.1.0"]).max() > 1e-3
 
 
