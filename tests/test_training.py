@@ -627,6 +627,12 @@ def test_a_privileged_critic_sees_more_than_the_actor_and_the_policy_runs_on_the
     ref = ev.resolve_checkpoint(run)
     report = ev.evaluate(ref, ev.choose_env(ref, "stage:easy"), episodes=2)
     assert len(report.episodes) == 2 and BaodingEnv().observation_space.shape == (86,)
+    # Back into a config without the extras: the same task, so the error names the setting.
+    with pytest.raises(ConfigError, match=r"its critic read 121 values where this config's reads 86: set "
+                                          r"`policy.critic_extra` as it was trained \(critic_extra: "
+                                          r"\[ball_spin, fingertips, physics, goal_phase\]\)"):
+        CurriculumTrainer.start(tmp_path / "run.yaml", run_dir=tmp_path / "back", progress=False, init_from=run)
+    assert not (tmp_path / "back").exists()
     for bad, message in (("policy.critic_extra=[die_velocity]", "'die_velocity' is not a privileged feature of "
                                                                  "the baoding task; allowed: ball_spin"),
                          ("policy.critic_extra=[physics, physics]", "listed twice")):

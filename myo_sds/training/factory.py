@@ -149,18 +149,20 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
     # versions, the 2022 ones under gym included, keep them where their pickled spaces may not load).
     _, params, _ = load_from_zip_file(str(model_file), load_data=False, device=model.device)
     weights = params.get("policy", {})
-    sizes = {"observation": _input_size(weights), "action": _output_size(weights)}
-    ours = {"observation": model.observation_space.shape[0], "action": model.action_space.shape[0]}
     actor_size = getattr(model.policy, "actor_observation_size", None)
-    widen = False
+    # The task is what the actor reads; a privileged critic reads more (policy.critic_extra).
+    sizes = {"observation": _input_size(weights, "lstm_actor"), "action": _output_size(weights)}
+    ours = {"observation": actor_size or model.observation_space.shape[0], "action": model.action_space.shape[0]}
     for kind, trained in sizes.items():
-        if trained is None or trained == ours[kind]:
-            continue
-        if kind == "observation" and trained == actor_size:
-            widen = True  # the same task; this run's critic sees more
-            continue
-        raise ConfigError(f"--init-from {model_file}: it was trained on {kind}s of {trained} values, this "
-                          f"config's task has {ours[kind]} (a policy of another task cannot start this one)")
+        if trained is not None and trained != ours[kind]:
+            raise ConfigError(f"--init-from {model_file}: it was trained on {kind}s of {trained} values, this "
+                              f"config's task has {ours[kind]} (a policy of another task cannot start this one)")
+    trained_critic, our_critic = _input_size(weights, "lstm_critic"), model.observation_space.shape[0]
+    widen = trained_critic is not None and trained_critic != our_critic
+    if widen and trained_critic != sizes["observation"]:
+        raise ConfigError(f"--init-from {model_file}: its critic read {trained_critic} values where this config's "
+                          f"reads {our_critic}: set `policy.critic_extra` as it was trained "
+                          f"({_trained_critic_extra(model_file)})")
     try:
         if _gaussian_into_lattice(model, model_file):
             _load_mean_network(model, model_file)
@@ -185,12 +187,25 @@ def initialize_from(model, venv, model_file: Path, statistics: Path) -> None:
         venv.obs_rms, venv.ret_rms = trained.obs_rms, trained.ret_rms
 
 
-def _input_size(weights: dict) -> int | None:
-    """The observation size a policy's weights read (its critic's LSTM reads all of it)."""
-    for name in ("lstm_critic.weight_ih_l0", "lstm_actor.weight_ih_l0"):
+def _input_size(weights: dict, lstm: str) -> int | None:
+    """The observation size one of a policy's LSTMs reads (without a critic LSTM: the actor's)."""
+    for name in (f"{lstm}.weight_ih_l0", "lstm_actor.weight_ih_l0"):
         if name in weights:
             return int(weights[name].shape[1])
     return None
+
+
+def _trained_critic_extra(model_file: Path) -> str:
+    """The ``policy.critic_extra`` of the run or model folder holding ``model_file``, as YAML."""
+    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.run_folder import RunFolder
+
+    run = RunFolder.containing(model_file)
+    try:
+        extra = load_run_config(run.config_file).policy.critic_extra if run is not None else None
+    except Exception:  # noqa: BLE001 (only a hint: any unreadable config gives the generic one)
+        extra = None
+    return f"critic_extra: [{', '.join(extra)}]" if extra else "its run's config.yaml names them"
 
 
 def _output_size(weights: dict) -> int | None:
