@@ -9,6 +9,7 @@ within +-200k env steps of it) and their ratio, then the stage table (env steps,
 evaluation return first -> best -> last, ours beside theirs); draws one panel per stage.
 
     python experiments/winner_2022/overlay.py ~/runs/baoding_sds-s0 --out experiments/winner_2022/overlay.png
+    python experiments/winner_2022/overlay.py ~/runs/baoding_sds-s0 --also ~/runs/branch-a ~/runs/branch-b
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ HERE = Path(__file__).resolve().parent
 THEIR_STAGES = {"hold-rsi": (1,), "rotate-30s": (2,), "rotate-25s": (3,), "rotate-20s": (4,), "rotate-15s": (5,),
                 "fixed-10s": (6,), "fixed-9s": (7,), "fixed-8s": (8,), "fixed-7s": (9, 10), "fixed-6s": (11,),
                 "fixed-5s": (12,)}
+BRANCH_COLORS = ("tab:orange", "tab:green", "tab:red", "tab:purple")  # --also runs, in order
 COMPARE_SPAN = 200_000  # env steps either side of a step whose evaluations are averaged
 
 
@@ -50,11 +52,16 @@ def their_curves() -> dict[str, tuple[np.ndarray, np.ndarray]]:
 def our_curves(run_dir: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per stage name of the run: (env steps in the stage, mean evaluation return)."""
     folder = RunFolder(run_dir)
-    records = [r for r in folder.read_evaluations() if r.kind in ("periodic", "final") and r.reward is not None]
+    every = folder.read_evaluations()
+    records = [r for r in every if r.kind in ("periodic", "final") and r.reward is not None]
     starts: dict[int, int] = {}
     state = folder.read_state()
     if state is not None:
         starts = dict(enumerate(state.stage_starts()))
+    # A running run's stage begun after its latest checkpoint: the step of the previous stage's
+    # last record (its end-of-stage probe, else its last evaluation, <= 40k env steps earlier).
+    for index in sorted({r.stage_index for r in records} - set(starts)):
+        starts[index] = max((r.step for r in every if r.stage_index < index), default=0)
     curves: dict[str, tuple[list[int], list[float]]] = {}
     for r in records:
         steps, values = curves.setdefault(r.stage, ([], []))
@@ -133,7 +140,8 @@ def stage_table(run_dir: Path, ours: dict) -> list[str]:
     return lines
 
 
-def plot(ours: dict, theirs: dict, path: Path, label: str, changes: dict | None = None) -> None:
+def plot(ours: dict, theirs: dict, path: Path, label: str, changes: dict | None = None,
+         branches: dict[str, dict] | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -148,6 +156,10 @@ def plot(ours: dict, theirs: dict, path: Path, label: str, changes: dict | None 
         if name in ours:
             steps, values = ours[name]
             ax.plot(steps / 1e6, values, color="tab:blue", lw=1.2, label=label)
+        for (branch, curves), color in zip((branches or {}).items(), BRANCH_COLORS):
+            if name in curves:
+                steps, values = curves[name]
+                ax.plot(steps / 1e6, values, color=color, lw=1.0, label=branch)
         for at, rate in (changes or {}).get(name, []):
             ax.axvline(at / 1e6, color="tab:blue", lw=0.8, ls="--")
             ax.text(at / 1e6, 60, f" lr {rate:.2g}", color="tab:blue", fontsize=8)
@@ -179,14 +191,21 @@ def main() -> None:
     parser.add_argument("run", type=Path, help="a run folder (or a resumable export) of configs/baoding_sds.yaml")
     parser.add_argument("--out", type=Path, default=HERE / "overlay.png", help="the figure (PNG)")
     parser.add_argument("--label", default=None, help="our curve's legend (default: the run folder's name)")
+    parser.add_argument("--also", type=Path, nargs="*", default=[], metavar="RUN",
+                        help=f"branches of the run (at most {len(BRANCH_COLORS)}), drawn beside it and compared")
     args = parser.parse_args()
+    if len(args.also) > len(BRANCH_COLORS):
+        parser.error(f"--also: at most {len(BRANCH_COLORS)} runs, got {len(args.also)}")
     ours, theirs = our_curves(args.run), their_curves()
     print("\n".join(compare(ours, theirs)))
     print("\n".join(stage_table(args.run, ours)))
     changes = rate_changes(args.run)
     for name, marks in changes.items():
         print(f"{name}: learning rate changed at " + ", ".join(f"{at / 1e6:.2f}M (to {rate:.2g})" for at, rate in marks))
-    plot(ours, theirs, args.out, args.label or args.run.name, changes)
+    branches = {run.name: our_curves(run) for run in args.also}
+    for name, curves in branches.items():
+        print(f"\n{name}:\n" + "\n".join(compare(curves, theirs)))
+    plot(ours, theirs, args.out, args.label or args.run.name, changes, branches)
     print(f"figure: {args.out}")
 
 
