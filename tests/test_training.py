@@ -627,6 +627,10 @@ def test_a_privileged_critic_sees_more_than_the_actor_and_the_policy_runs_on_the
     ref = ev.resolve_checkpoint(run)
     report = ev.evaluate(ref, ev.choose_env(ref, "stage:easy"), episodes=2)
     assert len(report.episodes) == 2 and BaodingEnv().observation_space.shape == (86,)
+    # Its model card's fine-tuning command keeps the critic's inputs.
+    from myo_sds.evaluation.model_card import model_card
+    assert (f'--init-from {run} --set "policy.critic_extra=[ball_spin, fingertips, physics, goal_phase]"'
+            in model_card(run, run))
     # Back into a config without the extras: the same task, so the error names the setting.
     with pytest.raises(ConfigError, match=r"its critic read 121 values where this config's reads 86: set "
                                           r"`policy.critic_extra` as it was trained \(critic_extra: "

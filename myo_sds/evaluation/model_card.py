@@ -70,6 +70,16 @@ def _scores(folder: RunFolder) -> list[str]:
             f"({numerics.get('cpu', '?')}): start noise moves every hand joint by up to that much at reset."]
 
 
+def _fine_tune_line(folder: RunFolder, model_dir: Path) -> str:
+    """The fine-tuning command; a policy trained with a privileged critic keeps it (the new
+    config must feed its critic the same extra inputs)."""
+    from myo_sds.curricula.schema import load_run_config
+
+    extra = load_run_config(folder.config_file).policy.critic_extra if folder.config_file.is_file() else ()
+    keep = f' --set "policy.critic_extra=[{", ".join(extra)}]"' if extra else ""
+    return f"python train.py --config configs/<run>.yaml --init-from {model_dir}{keep}   # fine-tune on another curriculum"
+
+
 def model_card(model_dir: Path, source_run: Path) -> str:
     """The card's Markdown for the exported folder ``model_dir`` of the run ``source_run``."""
     folder = RunFolder(model_dir)
@@ -95,7 +105,7 @@ def model_card(model_dir: Path, source_run: Path) -> str:
              "",
              "```bash",
              f"python evaluate.py {model_dir} --env {_final_task(folder)} --official --episodes 200",
-             f"python train.py --config configs/<run>.yaml --init-from {model_dir}   # fine-tune on another curriculum",
+             _fine_tune_line(folder, model_dir),
              "```"]
     if folder.command_file.is_file():
         lines += ["", "## How it was trained", "",
