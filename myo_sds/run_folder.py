@@ -196,7 +196,10 @@ class RunFolder:
                 shutil.copyfile(source, copy)
         # The export has no episode log: keep each stage's start time in the state itself.
         state = CurriculumState.from_json(state_file.read_text())
-        walls = state.stage_start_walls(self.read_episodes())[1:]
+        episodes = self.read_episodes()
+        if checkpoint is not None and checkpoint.steps < state.num_timesteps:  # a stage's best (best_of_stage)
+            state.rewind_current_stage(checkpoint.steps, episodes)
+        walls = state.stage_start_walls(episodes)[1:]
         state.history = [replace(t, wall_s=wall_s) for t, wall_s in zip(state.history, walls)]
         target.state_file.write_text(state.to_json())
         self._copy_evaluations(target, state.num_timesteps)
@@ -208,6 +211,24 @@ class RunFolder:
         records = [r for r in self.read_evaluations() if r.step <= max_step]
         if records:
             target.append_evaluations(records)
+
+    def best_of_stage(self, checkpoint: CheckpointFiles | None = None) -> CheckpointFiles:
+        """The best evaluated policy of the stage ``checkpoint`` (default: the newest complete
+        one) is in, as checkpoint files: its model and statistics, with that checkpoint's
+        curriculum and random state (:meth:`export_model` rewinds the state to the policy's step)."""
+        checkpoint = checkpoint or self.latest_checkpoint()
+        if checkpoint is None:
+            raise FileNotFoundError(f"{self.path}: no complete checkpoint")
+        state = checkpoint.read_state()
+        step = state.best_evaluated_step
+        if step is None:
+            raise FileNotFoundError(f"{self.path}: the checkpoint at {checkpoint.steps:,} steps has no evaluated "
+                                    f"policy in its stage (stage {state.stage_index + 1}: no `evaluate` in the "
+                                    "curriculum, or none run yet)")
+        model, statistics = self.best_files(step)
+        if not (model.is_file() and statistics.is_file()):
+            raise FileNotFoundError(f"{self.path}: the stage's best policy ({model.name}, {statistics.name}) is missing")
+        return CheckpointFiles(step, model, statistics, checkpoint.state, checkpoint.random_state)
 
     def export_resumable(self, destination: Path, checkpoint: CheckpointFiles | None = None) -> RunFolder:
         """What ``--resume`` needs of the run, for another machine: config, curriculum,

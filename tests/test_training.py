@@ -391,6 +391,43 @@ def test_a_stage_evaluates_periodically_and_hands_its_best_policy_to_the_next(tm
     assert not list(RunFolder(run).checkpoint_dir.glob("best_model_*"))
 
 
+def test_a_stage_s_best_evaluated_policy_exports_as_a_model_folder(tiny_run, tmp_path, capsys):
+    """``--export RUN --to DIR --best``: the stage's best evaluated policy, not the newest
+    checkpoint's, described at its own step."""
+    from myo_sds import evaluation as ev
+    from myo_sds.cli.train import main
+
+    curriculum = CURRICULUM.replace(
+        "advance: {metric: score, threshold: 0.01, window: 8}",
+        "advance: {metric: score, threshold: 1.0, window: 8}\n"
+        "    evaluate: {every: 256, episodes: 3, env: stage, start_noise: 0.02}")
+    run = tmp_path / "run"
+    state = CurriculumTrainer.start(write_config(tmp_path, total=1024, curriculum=curriculum),
+                                    run_dir=run, progress=False).run()
+    assert state.stage_index == 0 and state.best_evaluated_step is not None
+    # This seed's best evaluation is not the last one, so the export goes back in the stage.
+    assert state.best_evaluated_step < state.num_timesteps == 1024
+    assert main(["--export", str(run), "--to", str(tmp_path / "best"), "--best"]) == 0
+    exported = RunFolder(tmp_path / "best").read_state()
+    assert exported.num_timesteps == exported.steps_per_stage["easy"] == state.best_evaluated_step
+    logged = [e for e in RunFolder(run).read_episodes() if e.step <= state.best_evaluated_step]
+    assert exported.stage_episodes == len(logged) < state.stage_episodes
+    assert exported.wall_s == logged[-1].wall_s
+    # Evaluated again the same way, it scores the stage's best.
+    ref = ev.resolve_checkpoint(tmp_path / "best")
+    again = ev.evaluate(ref, ev.choose_env(ref, "stage:easy", start_noise=0.02), episodes=3, seed=0)
+    assert again.summary()["score"] == pytest.approx(state.best_evaluated, abs=1e-12)
+    card = (tmp_path / "best" / "README.md").read_text()
+    assert f"at {state.best_evaluated_step:,} env steps" in card
+    assert f"the stage's best evaluated policy (score {state.best_evaluated:.3f}" in card
+    # A run without stage evaluations has no best to export; with --resumable it is refused.
+    assert main(["--export", str(tiny_run.path), "--to", str(tmp_path / "x"), "--best"]) == 2
+    assert "no evaluated policy in its stage (stage 2" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--export", str(run), "--to", str(tmp_path / "y"), "--best", "--resumable"])
+    assert "--best exports a stage's best evaluated policy" in capsys.readouterr().err
+
+
 def test_a_stage_evaluation_is_checked_when_read(tmp_path, capsys):
     for written, message in (("{episodes: 3}", "every: missing"),
                              ("{every: 256, env: p3}", "'p3' is not one of stage, stage:NAME, p1, p1_2022, p2"),

@@ -4,7 +4,7 @@
     myo-sds-train --config quickstart             # a bundled config, by name
     python train.py --resume runs/quickstart-20261122-101500-s0 [--max-hours 8] [--total-steps N]
     python train.py --status runs/quickstart-20261122-101500-s0 [--json summary.json]
-    python train.py --export runs/quickstart-20261122-101500-s0 --to models/quickstart [--load-checkpoint N]
+    python train.py --export runs/quickstart-20261122-101500-s0 --to models/quickstart [--load-checkpoint N] [--best]
 """
 
 from __future__ import annotations
@@ -31,6 +31,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "state, config and curriculum to --to, for sharing")
     parser.add_argument("--to", type=Path, metavar="DIR", help="with --export: the model folder to write")
     parser.add_argument("--load-checkpoint", type=int, metavar="STEPS", help="with --export: that checkpoint")
+    parser.add_argument("--best", action="store_true",
+                        help="with --export: the best evaluated policy of the checkpoint's stage (its stage "
+                             "evaluation's best so far), not the checkpoint's own")
     parser.add_argument("--resumable", action="store_true",
                         help="with --export: write what --resume needs (config, curriculum, one checkpoint with its "
                              "optimizer, statistics, curriculum and random state) and the stage table, not a model "
@@ -58,6 +61,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.export and args.to is None:
         parser.error("--export needs --to DIR")
+    if args.best and (not args.export or args.resumable):
+        parser.error("--best exports a stage's best evaluated policy: use it with --export, without --resumable "
+                     "(a resumable export carries the stage's best already)")
     if args.resume and (args.overrides or args.seed is not None or args.n_envs is not None or args.run_dir):
         parser.error("--resume continues a run as configured; only --total-steps, --max-hours, "
                      "--no-progress and --background apply")
@@ -105,9 +111,10 @@ def show_status(run_dir: Path, json_path: Path | None) -> int:
     return 0
 
 
-def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool) -> int:
+def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool, best: bool = False) -> int:
     """A model folder (with its model card) or, ``resumable``, what ``--resume`` needs of the
-    run (with its stage table), of the newest checkpoint or the one at ``steps``."""
+    run (with its stage table), of the newest checkpoint or the one at ``steps``; ``best``: the
+    model folder of that checkpoint's stage's best evaluated policy."""
     from myo_sds.evaluation.model_card import write_model_card
     from myo_sds.evaluation.summary import format_summary, summarize
     from myo_sds.run_folder import RunFolder, atomic_write_text
@@ -117,6 +124,8 @@ def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool)
         checkpoint = None if steps is None else run.checkpoint(steps)
         if checkpoint is not None and not checkpoint.complete():
             raise FileNotFoundError(f"{run_dir}: no complete checkpoint at {steps} steps")
+        if best:
+            checkpoint = run.best_of_stage(checkpoint)
         if resumable:
             target = run.export_resumable(destination, checkpoint)
             # The run's stage table (its newest checkpoint's), with the hours its episode log gives.
@@ -176,7 +185,7 @@ def _main(args: argparse.Namespace, started: list) -> int:
     if args.status:
         return show_status(args.status, args.json)
     if args.export:
-        return export(args.export, args.to, args.load_checkpoint, args.resumable)
+        return export(args.export, args.to, args.load_checkpoint, args.resumable, args.best)
     with sigint_held():  # NumPy (the config's), MuJoCo and torch load here
         from myo_sds.curricula.schema import ConfigError, load_run_config
         from myo_sds.run_folder import RunFolder

@@ -80,6 +80,15 @@ def _fine_tune_line(folder: RunFolder, model_dir: Path) -> str:
     return f"python train.py --config configs/<run>.yaml --init-from {model_dir}{keep}   # fine-tune on another curriculum"
 
 
+def _best_of_stage(folder: RunFolder) -> str:
+    """Whether the policy is its stage's best evaluated one (``--export --best``)."""
+    state = folder.read_state()
+    if state is None or state.best_evaluated_step is None or state.best_evaluated_step != state.num_timesteps:
+        return ""
+    reward = "" if state.best_evaluated_reward is None else f", return {state.best_evaluated_reward:.0f}"
+    return f", the stage's best evaluated policy (score {state.best_evaluated:.3f}{reward})"
+
+
 def model_card(model_dir: Path, source_run: Path) -> str:
     """The card's Markdown for the exported folder ``model_dir`` of the run ``source_run``."""
     folder = RunFolder(model_dir)
@@ -89,8 +98,8 @@ def model_card(model_dir: Path, source_run: Path) -> str:
     lines = [f"# {folder.path.name}",
              "",
              f"RecurrentPPO policy exported from the run `{source_run.name}` at {summary.env_steps:,} env steps "
-             f"({summary.wall_s / 3600:.2f} h of training, {where}), with its optimizer state, its "
-             "normalization statistics and its curriculum state.",
+             f"({summary.wall_s / 3600:.2f} h of training, {where}){_best_of_stage(folder)}, with its optimizer "
+             "state, its normalization statistics and its curriculum state.",
              *_started_from(folder),
              *_scores(folder),
              "",
