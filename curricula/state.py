@@ -149,21 +149,20 @@ class CurriculumState:
 
     def rewind_current_stage(self, step: int, episodes: Sequence[LoggedEpisode] = ()) -> None:
         """Describe the current stage as it stood at ``step`` (an earlier policy of it, e.g. its best
-        evaluated one, exported): the step counts and, from the run's episode log, the stage's
-        episodes and the training wall time. The advancement window is left as it is."""
+        evaluated one, exported): the step counts and, when the run's episode log reaches back to
+        ``step`` (a log restarted by a resume may not), the stage's episodes and the training wall
+        time. The advancement window is left as it is."""
         if not self.stage_start_step <= step <= self.num_timesteps:
             raise ValueError(f"step {step:,} is outside the current stage ({self.stage_start_step:,} to "
                              f"{self.num_timesteps:,})")
+        logged = [e for e in episodes if e.step <= self.num_timesteps]
+        if logged and logged[0].step <= step:
+            self.stage_episodes -= sum(1 for e in logged if e.step > step)
+            self.wall_s = [e.wall_s for e in logged if e.step <= step][-1]
         self.num_timesteps = step
-        stage = self.trained_stages()[-1] if self.steps_per_stage else None
-        if stage is not None:
-            self.steps_per_stage[stage] = self.stage_steps
-        before = [e for e in episodes if e.step <= step]
-        if before:
-            self.stage_episodes = sum(1 for e in before if e.step > self.stage_start_step)
-            self.wall_s = before[-1].wall_s
-            if stage is not None:
-                self.episodes_per_stage[stage] = self.stage_episodes
+        if self.steps_per_stage:
+            stage = self.trained_stages()[-1]
+            self.steps_per_stage[stage], self.episodes_per_stage[stage] = self.stage_steps, self.stage_episodes
 
     # the whole run -------------------------------------------------------------------
 

@@ -54,6 +54,28 @@ def test_a_stage_ends_into_the_history_and_the_next_begins_empty():
     assert CurriculumState.from_json(state.to_json()) == state
 
 
+def test_a_stage_rewinds_to_an_earlier_policy_of_it_as_far_as_the_episode_log_reaches():
+    from types import SimpleNamespace
+
+    import pytest
+
+    state = progress([0.5] * 40, steps=4_000)  # stage s2: steps 1,000-5,000, 40 episodes
+    state.wall_s = 100.0
+    # An episode ended every 100 steps from 2,000 on (the log of the stage's last 31 episodes).
+    log = [SimpleNamespace(step=step, wall_s=step / 50) for step in range(2_000, 5_001, 100)]
+    whole = CurriculumState.from_json(state.to_json())
+    whole.rewind_current_stage(3_000, log)
+    # 20 episodes ended after step 3,000 (3,100 ... 5,000); the last one by then at wall 60 s.
+    assert (whole.num_timesteps, whole.stage_steps, whole.steps_per_stage["s2"]) == (3_000, 2_000, 2_000)
+    assert (whole.stage_episodes, whole.episodes_per_stage["s2"], whole.wall_s) == (20, 20, 60.0)
+    # A log that begins after step 3,000 (restarted by a resume) cannot say: counts stay.
+    partial = CurriculumState.from_json(state.to_json())
+    partial.rewind_current_stage(3_000, log[15:])
+    assert (partial.num_timesteps, partial.stage_episodes, partial.wall_s) == (3_000, 40, 100.0)
+    with pytest.raises(ValueError, match="step 500 is outside the current stage"):
+        state.rewind_current_stage(500, log)
+
+
 def test_min_steps_delays_passing():
     rule = AdvanceRule(threshold=0.5, window=2, min_steps=5000)
     assert decide(rule, progress([1, 1], steps=4999)) is Decision.STAY
