@@ -362,19 +362,33 @@ def test_die_curriculum_advances_a_stage(tmp_path):
     assert trainer.venv.get_attr("knobs")[0].goal_rotation[0].high == 0.5
 
 
-def test_a_stage_evaluates_periodically_and_hands_its_best_policy_to_the_next(tmp_path, capsys):
+def _train_with_stage_evaluation(tmp_path, advance_extra: str = "", evaluate_extra: str = ""):
+    """The tiny run with stage 1 unpassable (threshold 1.0) and evaluated every 256 steps (3
+    episodes, start noise 0.02), trained to its 1,024-step budget: (run folder, final state)."""
+    curriculum = CURRICULUM.replace(
+        "advance: {metric: score, threshold: 0.01, window: 8}",
+        f"advance: {{metric: score, threshold: 1.0, window: 8{advance_extra}}}\n"
+        f"    evaluate: {{every: 256, episodes: 3, env: stage, start_noise: 0.02{evaluate_extra}}}")
+    run = tmp_path / "run"
+    state = CurriculumTrainer.start(write_config(tmp_path, total=1024, curriculum=curriculum),
+                                    run_dir=run, progress=False).run()
+    return run, state
+
+
+def _evaluated_again(policy) -> float:
+    """The policy's score evaluated as the stage evaluation does (stage 1, noise 0.02, seeds 0-2)."""
     from myo_sds import evaluation as ev
+
+    ref = ev.resolve_checkpoint(policy)
+    return ev.evaluate(ref, ev.choose_env(ref, "stage:easy", start_noise=0.02), episodes=3, seed=0).summary()["score"]
+
+
+def test_a_stage_evaluates_periodically_and_hands_its_best_policy_to_the_next(tmp_path, capsys):
     from myo_sds.evaluation.summary import format_summary, summarize
 
     # Stage 1 cannot pass (threshold 1.0): it runs its 1,024 steps, evaluated every 256, and the
     # run's budget ends right at the transition, so the final model is the policy handed on.
-    curriculum = CURRICULUM.replace(
-        "advance: {metric: score, threshold: 0.01, window: 8}",
-        "advance: {metric: score, threshold: 1.0, window: 8, max_steps: 1024}\n"
-        "    evaluate: {every: 256, episodes: 3, env: stage, start_noise: 0.02, hand_off: best}")
-    run = tmp_path / "run"
-    state = CurriculumTrainer.start(write_config(tmp_path, total=1024, curriculum=curriculum),
-                                    run_dir=run, progress=False).run()
+    run, state = _train_with_stage_evaluation(tmp_path, ", max_steps: 1024", ", hand_off: best")
     (easy,) = state.history
     assert easy.decision == "timed_out" and easy.at_step == 1024
     scores = [e.value for e in scalar_events(RunFolder(run).tensorboard_dir, "eval/score")]
@@ -382,9 +396,7 @@ def test_a_stage_evaluates_periodically_and_hands_its_best_policy_to_the_next(tm
     assert easy.best_evaluated == pytest.approx(max(scores))
     assert easy.handed_off_step is None or easy.handed_off_step < easy.at_step
     # The final model is the best evaluated one: evaluated again the same way, it scores the best.
-    ref = ev.resolve_checkpoint(run)
-    again = ev.evaluate(ref, ev.choose_env(ref, "stage:easy", start_noise=0.02), episodes=3, seed=0)
-    assert again.summary()["score"] == pytest.approx(easy.best_evaluated, abs=1e-12)
+    assert _evaluated_again(run) == pytest.approx(easy.best_evaluated, abs=1e-12)
     text = format_summary(summarize(run))
     assert f"best {easy.best_evaluated:.3f}" in text and "handed on" in text
     # Older best policies are pruned once a checkpoint no longer names them.
@@ -394,16 +406,9 @@ def test_a_stage_evaluates_periodically_and_hands_its_best_policy_to_the_next(tm
 def test_a_stage_s_best_evaluated_policy_exports_as_a_model_folder(tiny_run, tmp_path, capsys):
     """``--export RUN --to DIR --best``: the stage's best evaluated policy, not the newest
     checkpoint's, described at its own step."""
-    from myo_sds import evaluation as ev
     from myo_sds.cli.train import main
 
-    curriculum = CURRICULUM.replace(
-        "advance: {metric: score, threshold: 0.01, window: 8}",
-        "advance: {metric: score, threshold: 1.0, window: 8}\n"
-        "    evaluate: {every: 256, episodes: 3, env: stage, start_noise: 0.02}")
-    run = tmp_path / "run"
-    state = CurriculumTrainer.start(write_config(tmp_path, total=1024, curriculum=curriculum),
-                                    run_dir=run, progress=False).run()
+    run, state = _train_with_stage_evaluation(tmp_path)
     assert state.stage_index == 0 and state.best_evaluated_step is not None
     # This seed's best evaluation is not the last one, so the export goes back in the stage.
     assert state.best_evaluated_step < state.num_timesteps == 1024
@@ -414,9 +419,7 @@ def test_a_stage_s_best_evaluated_policy_exports_as_a_model_folder(tiny_run, tmp
     assert exported.stage_episodes == len(logged) < state.stage_episodes
     assert exported.wall_s == logged[-1].wall_s
     # Evaluated again the same way, it scores the stage's best.
-    ref = ev.resolve_checkpoint(tmp_path / "best")
-    again = ev.evaluate(ref, ev.choose_env(ref, "stage:easy", start_noise=0.02), episodes=3, seed=0)
-    assert again.summary()["score"] == pytest.approx(state.best_evaluated, abs=1e-12)
+    assert _evaluated_again(tmp_path / "best") == pytest.approx(state.best_evaluated, abs=1e-12)
     card = (tmp_path / "best" / "README.md").read_text()
     assert f"at {state.best_evaluated_step:,} env steps" in card
     assert f"the stage's best evaluated policy (score {state.best_evaluated:.3f}" in card
