@@ -66,13 +66,15 @@ class AdvanceRule:
 
 HAND_OFFS = ("best", "last")
 SELECTIONS = ("score", "reward")
+EVALUATION_SEEDS = ("fresh", "fixed")
 
 
 @dataclass(frozen=True)
 class StageEvaluation:
     """Deterministic episodes every ``every`` env steps of the stage, as the 2022 winner's
-    EvalCallback: ``episodes`` episodes (seeds 0 .. episodes-1, the same at every evaluation) on
-    ``env`` (``stage``: the stage's own task; ``stage:NAME``: another stage's, e.g. the task a
+    EvalCallback: ``episodes`` episodes (``seeds: fresh``: new ones at every evaluation, seeds
+    from the env step, as their EvalCallback drew new episodes of the training envs; ``fixed``:
+    seeds 0 .. episodes-1 every time) on ``env`` (``stage``: the stage's own task; ``stage:NAME``: another stage's, e.g. the task a
     practice stage is for; or a preset, e.g. ``p1_2022``), each hand joint moved
     by U(-``start_noise``, ``start_noise``) at reset. The policy of the best mean score (or return,
     ``select: reward``, as the winner's EvalCallback chose) is kept; with ``hand_off: best`` the next
@@ -85,6 +87,9 @@ class StageEvaluation:
                        help="stage (the stage's own task), stage:NAME (another stage's) or a preset, e.g. p1_2022")
     start_noise: float = setting(0.0, parse=number(low=0), help="rad: each hand joint moved by up to this at reset")
     hand_off: str = setting("best", parse=one_of(*HAND_OFFS), help="best | last: the policy the next stage starts from")
+    seeds: str = setting("fresh", parse=one_of(*EVALUATION_SEEDS),
+                         help="fresh (new episodes at every evaluation: the best is not chosen on the same few "
+                              "instances) | fixed (seeds 0 .. episodes-1 every time)")
     select: str = setting("score", parse=one_of(*SELECTIONS),
                           help="score | reward: what makes an evaluation the best (reward: the mean return under "
                                "the stage's reward weights)")

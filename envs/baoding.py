@@ -7,7 +7,7 @@ distribution for the static-to-dynamic stabilization curriculum.
 
 Random draws at reset, in this order (the presets draw exactly what the official env draws,
 so the same seed gives the same task instance there and here):
-  1. direction, if ``direction == "random"`` (one of hold, cw, ccw);
+  1. direction, if ``direction`` is ``"random"`` (one of hold, cw, ccw) or a list (one of its members);
   2. start angle, if ``start_angle == "uniform"`` (U(0, 2 pi)) or a list (one of its angles);
   3. start offset, if ``start_offset`` is set;
   4. x radius, y radius (always, even when fixed), period (unless static);
@@ -44,6 +44,7 @@ from myo_sds.envs.baoding_task import (  # noqa: F401  (re-exported: the env's p
     REWARD_TERMS,
     BaodingKnobs,
     BaodingTask,
+    draw_direction,
 )
 from myo_sds.envs.hand_env import FINGERTIP_SITES, MuscleHandEnv, vector_norm
 from myo_sds.envs.knobs import DEFAULT_PRESET, TaskKnobs
@@ -99,7 +100,7 @@ class BaodingEnv(MuscleHandEnv):
     def sample_task(self, rng: np.random.Generator) -> BaodingTask:
         """Draw a task instance from the current knobs (draw order: module docstring)."""
         k = self.knobs
-        direction = DIRECTIONS[int(rng.choice(3))] if k.direction == "random" else k.direction
+        direction = draw_direction(k.direction, rng)
         if k.start_angle == "uniform":
             start = float(rng.uniform(low=0, high=2 * np.pi))
         elif isinstance(k.start_angle, tuple):

@@ -126,6 +126,28 @@ def _start_angle(name: str, value: Any) -> str | float | tuple[float, ...]:
         f"{name} (or one of fixed, on_balls, uniform, or a list of radians)", value)
 
 
+def _direction(name: str, value: Any) -> str | tuple[str, ...]:
+    """One direction, ``random`` (over all three), or a list of distinct directions to draw from."""
+    if isinstance(value, (list, tuple)):
+        if not value:
+            raise ValueError(f"{name}: an empty list; give directions to draw from, e.g. [cw, ccw]")
+        drawn = tuple(parse_choice(f"{name}[{i}]", v, DIRECTIONS) for i, v in enumerate(value))
+        if len(set(drawn)) != len(drawn):
+            raise ValueError(f"{name}: {list(value)!r} repeats a direction; each may appear once")
+        return drawn
+    if value not in (*DIRECTIONS, "random"):
+        raise ValueError(f"{name}: {value!r} is not one of {', '.join(DIRECTIONS)}, random, "
+                         f"or a list of them (e.g. [cw, ccw])")
+    return value
+
+
+def draw_direction(direction: str | tuple[str, ...], rng: np.random.Generator) -> str:
+    """The episode's direction: ``random`` draws over all three, a list over its members (one
+    draw either way), one direction is itself (no draw)."""
+    options = DIRECTIONS if direction == "random" else direction if isinstance(direction, tuple) else None
+    return direction if options is None else options[int(rng.choice(len(options)))]
+
+
 def _friction(name: str, value: Any) -> tuple[tuple[float, ...], tuple[float, ...]]:
     low, high = parse_vector_range(name, value, 3)
     if np.any(low < 0):
@@ -156,8 +178,10 @@ class BaodingKnobs(TaskKnobs):
         },
     }
 
-    direction: str = setting("ccw", parse=choice(*DIRECTIONS, "random"),
-                          help="hold | cw | ccw | random (uniform over the three, as in P2)")
+    direction: str | tuple[str, ...] = setting(
+        "ccw", parse=_direction,
+        help="hold | cw | ccw | random (uniform over the three, as in P2) | a list to draw from uniformly, e.g. "
+             "[cw, ccw] (the 2022 winner's 'random' before MyoSuite 1.2.3 added hold)")
     period: Range | None = setting(Range(5.0, 5.0), parse=_period,  # None: static targets
                                 help="seconds per revolution of the targets: a value, [min, max], or 'static'")
     x_radius: Range = setting(Range(0.025, 0.025), parse=ranged(positive=True),

@@ -1,6 +1,7 @@
 """The 2022 challenge's physics against ours: same hand, different MuJoCo.
 
-    python experiments/physics_2022.py [--policy DIR] [--episodes 80] [--cache DIR] [--json FILE]
+    python experiments/physics_2022.py [--policy DIR] [--episodes 80] [--start-noise RAD]
+        [--stages hold,p1_2022,fixed10_ccw] [--scores-only] [--cache DIR] [--json FILE]
 
 MyoChallenge 2022 ran MyoSuite 1.2.x on MuJoCo 2.1.0 (through free-mujoco-py), with the Baoding
 hand compiled to a binary (``myo_hand_baoding.mjb``) that no MuJoCo installable on Python 3.11
@@ -15,9 +16,13 @@ library with ctypes (struct offsets from its own X-macro headers) and reports:
    physics): per-actuator force difference and hand/ball position error after 10 substeps, with
    and without 2.1.0's length curve emulated in ours;
 4. ``--policy``'s score on the hold stage (random phases, balls on the targets at their resting
-   heights, as the 2022 winner's env placed them) and on ``p1_2022``, stepped by the 2022
-   physics, by ours, and by ours with 2.1.0's length curve; observations and rewards always
-   come from our env (the model state is copied between the two simulators each step).
+   heights, as the 2022 winner's env placed them), on ``p1_2022`` and on the 2022 start from
+   rest counter-clockwise at 10 s per revolution (``fixed10_ccw``, the chain's ``fixed-10s``
+   stage in the 2022 task's direction), stepped by the 2022 physics, by ours, and by ours with
+   2.1.0's length curve; observations and rewards always come from our env (the model state is
+   copied between the two simulators each step). ``--start-noise`` moves each hand joint by
+   U(-noise, noise) at reset, the same offsets per seed as ``evaluate.py --start-noise``, so a
+   fixed start is scored as a policy rather than as one replayed episode.
 
 Timing-free; takes ~2-4 min for 80 episodes per physics.
 """
@@ -50,9 +55,10 @@ import mujoco  # noqa: E402
 
 import myo_sds.envs.hand_env as hand_env  # noqa: E402
 from myo_sds.envs.assets import load_hand_model  # noqa: E402
-from myo_sds.envs.baoding import BaodingEnv  # noqa: E402
+from myo_sds.envs.baoding import N_HAND_JOINTS, BaodingEnv  # noqa: E402
 from myo_sds.envs.muscle_2022 import MuscleCurve2022  # noqa: E402
 from myo_sds.evaluation.checkpoints import load_policy, resolve_checkpoint  # noqa: E402
+from myo_sds.evaluation.episodes import start_offsets  # noqa: E402
 
 WHEELS = {"free-mujoco-py==2.1.6": "free_mujoco_py-2.1.6-py3-none-any.whl",
           "MyoSuite==1.2.2": "MyoSuite-1.2.2-py2.py3-none-any.whl"}
@@ -61,6 +67,8 @@ MJB = "myosuite/envs/myo/assets/hand/myo_hand_baoding.mjb"
 STATE_FIELDS = ("qpos", "qvel", "act", "qacc_warmstart")
 HOLD_STAGE = dict(preset="p1_2022", direction="hold", period="static", start_angle="uniform",
                   rsi_probability=1.0, rsi_height="rest")
+STAGES = {"hold": HOLD_STAGE, "p1_2022": {"preset": "p1_2022"},
+          "fixed10_ccw": {"preset": "p1_2022", "direction": "ccw", "period": 10.0}}
 DTYPES = {"mjtNum": np.float64, "int": np.int32, "float": np.float32, "mjtByte": np.uint8, "char": np.uint8}
 
 
@@ -320,12 +328,16 @@ def one_step_errors(old: Mujoco210, ours: mujoco.MjModel, states) -> dict:
     return report
 
 
-def policy_score(policy, env_knobs: dict, episodes: int, old: Mujoco210 | None, emulate: bool) -> dict:
+def policy_score(policy, env_knobs: dict, episodes: int, old: Mujoco210 | None, emulate: bool,
+                 start_noise: float = 0.0) -> dict:
     env = BaodingEnv(**env_knobs)
     by_sector: dict[int, list[tuple[float, bool]]] = {}
+    solved_steps: list[int] = []
     with stepped_by(old), (fl_210_in_ours(env.model) if emulate else contextlib.nullcontext()):
         for seed in range(episodes):
             obs, _ = env.reset(seed=seed)
+            if start_noise:
+                obs = env.move_hand_joints(start_offsets(seed, start_noise, N_HAND_JOINTS))
             start = env.task.start_angle
             lstm, first, solved, dropped = None, True, 0, False
             for _ in range(env.horizon):
@@ -338,8 +350,10 @@ def policy_score(policy, env_knobs: dict, episodes: int, old: Mujoco210 | None, 
                     break
             sector = int((start % (2 * math.pi)) / (2 * math.pi) * 8) if start is not None else 0
             by_sector.setdefault(sector, []).append((solved / env.horizon, dropped))
+            solved_steps.append(solved)
     every = [x for v in by_sector.values() for x in v]
     return {"score": float(np.mean([s for s, _ in every])), "dropped": float(np.mean([d for _, d in every])),
+            "median_solved_steps": float(np.median(solved_steps)),
             "by_sector_45deg": {f"{45 * k}-{45 * k + 45}": round(float(np.mean([s for s, _ in v])), 3)
                                 for k, v in sorted(by_sector.items())}}
 
@@ -351,40 +365,58 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=80)
     parser.add_argument("--cache", type=Path, default=Path.home() / ".cache/myo-sds/physics_2022")
     parser.add_argument("--muscle", default="RI5", help="muscle whose length curve is tabulated")
+    parser.add_argument("--start-noise", type=float, default=0.0,
+                        help="rad: each hand joint moved by U(-noise, noise) at reset (as evaluate.py's)")
+    parser.add_argument("--stages", default="hold,p1_2022",
+                        help=f"comma-separated, of {', '.join(STAGES)}")
+    parser.add_argument("--scores-only", action="store_true", help="skip reports 1-3 (model, curve, one step)")
     parser.add_argument("--json", type=Path, help="also write the report here")
     args = parser.parse_args()
+    stages = args.stages.split(",")
+    if unknown := [s for s in stages if s not in STAGES]:
+        parser.error(f"--stages: unknown {', '.join(unknown)}; allowed: {', '.join(STAGES)}")
+    if args.start_noise < 0 or not math.isfinite(args.start_noise):
+        parser.error(f"--start-noise {args.start_noise}: expected radians >= 0, e.g. 0.02")
 
     old = Mujoco210(fetch_2022_files(args.cache))
     ours, _ = load_hand_model("myohand_baoding.xml")
     policy = load_policy(resolve_checkpoint(args.policy), "baoding")
-    report = {"policy": args.policy, "episodes": args.episodes}
+    report = {"policy": args.policy, "episodes": args.episodes, "start_noise": args.start_noise}
+    if not args.scores_only:
+        model_reports(report, old, ours, policy, args.muscle)
 
+    report["scores"] = {}
+    for stage in stages:
+        # Without noise a fixed start replays one episode: a few suffice there.
+        fixed = stage != "hold" and not args.start_noise
+        episodes = max(4, args.episodes // 20) if fixed else args.episodes
+        for label, physics, emulate in (("mujoco210_2022_model", old, False), ("ours", None, False),
+                                        ("ours_with_2.1.0_length_curve", None, True)):
+            result = policy_score(policy, STAGES[stage], episodes, physics, emulate, args.start_noise)
+            report["scores"][f"{stage}/{label}"] = result
+            print(f"4. {stage:11s} {label:30s} score {result['score']:.3f}, dropped {result['dropped']:.2f}, "
+                  f"median solved steps {result['median_solved_steps']:.0f} ({episodes} episodes, start noise "
+                  f"{args.start_noise:g}) by sector {result['by_sector_45deg']}")
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=1))
+
+
+def model_reports(report: dict, old: Mujoco210, ours: mujoco.MjModel, policy, muscle: str) -> None:
+    """Reports 1-3: model fields, one muscle's length curve, one env step from the same states."""
     report["model_differences"] = compare_models(old, ours)
     print("1. model fields differing beyond 1e-5 (2022 binary vs ours):")
     for row in report["model_differences"]:
         print(f"   {row['field']:24s} {row['entries']:4d} entries, max |diff| {row['max_abs_diff']:.3g} "
               f"(row {row['row']}: 2022 {row['old']:.4g}, ours {row['ours']:.4g})")
 
-    report["muscle_curve"] = muscle_curve(old, ours, args.muscle)
-    print(f"2. {args.muscle}'s active gain (N per unit activation, negative pulls) at zero velocity:")
+    report["muscle_curve"] = muscle_curve(old, ours, muscle)
+    print(f"2. {muscle}'s active gain (N per unit activation, negative pulls) at zero velocity:")
     for row in report["muscle_curve"]:
         print(f"   L/L0 {row['normalized_length']:4.2f}: MuJoCo 2.1.0 {row['gain_mujoco210']:8.2f}   ours {row['gain_ours']:8.2f}")
 
     states = hold_states(old, policy, episodes=6, steps=60)
     report["one_step"] = one_step_errors(old, ours, states)
     print(f"3. one env step from the same {len(states)} states:", json.dumps(report["one_step"], indent=1))
-
-    report["scores"] = {}
-    for stage, knobs in (("hold", HOLD_STAGE), ("p1_2022", {"preset": "p1_2022"})):
-        episodes = args.episodes if stage == "hold" else max(4, args.episodes // 20)
-        for label, physics, emulate in (("mujoco210_2022_model", old, False), ("ours", None, False),
-                                        ("ours_with_2.1.0_length_curve", None, True)):
-            result = policy_score(policy, knobs, episodes, physics, emulate)
-            report["scores"][f"{stage}/{label}"] = result
-            print(f"4. {stage:8s} {label:30s} score {result['score']:.3f}, dropped {result['dropped']:.2f} "
-                  f"({episodes} episodes) by sector {result['by_sector_45deg']}")
-    if args.json:
-        args.json.write_text(json.dumps(report, indent=1))
 
 
 if __name__ == "__main__":

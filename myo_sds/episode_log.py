@@ -7,6 +7,7 @@ Only :class:`myo_sds.run_folder.RunFolder` calls these, with its own file's path
 from __future__ import annotations
 
 import csv
+import json
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -53,7 +54,7 @@ class EpisodeRecord:
 
 
 EVALUATION_COLUMNS = ("step", "stage_index", "stage", "kind", "env", "episodes", "score", "reward", "drop_rate",
-                      "median_solved_steps", "best")
+                      "median_solved_steps", "best", "first_seed", "by_direction")
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,9 @@ class EvaluationRecord:
 
     ``kind``: ``periodic`` (the stage's ``evaluate``), ``final`` (its last policy, at the stage's
     end) or ``probe`` (the curriculum's stage-end probe of the policy handed on); ``best``: it became
-    the stage's best."""
+    the stage's best; ``first_seed``: its episodes were reset with seeds ``first_seed ..
+    first_seed + episodes - 1`` (``evaluate.py --seed`` replays them); ``by_direction``: Baoding's
+    episodes, mean return, median solved steps and drop rate per direction (JSON in the file)."""
 
     step: int
     stage_index: int
@@ -75,26 +78,32 @@ class EvaluationRecord:
     drop_rate: float
     median_solved_steps: float
     best: bool = False
+    first_seed: int = 0  # files written before the column existed evaluated seeds 0 ..
+    by_direction: dict[str, dict] | None = None
 
     def to_row(self) -> tuple:
         reward = "" if self.reward is None else f"{self.reward:.6g}"
+        directions = json.dumps(self.by_direction, separators=(",", ":")) if self.by_direction else ""
         return (self.step, self.stage_index, self.stage, self.kind, self.env, self.episodes, f"{self.score:.6g}", reward,
-                f"{self.drop_rate:.6g}", f"{self.median_solved_steps:g}", int(self.best))
+                f"{self.drop_rate:.6g}", f"{self.median_solved_steps:g}", int(self.best), self.first_seed, directions)
 
     @classmethod
     def from_row(cls, row: dict[str, str]) -> EvaluationRecord:
         return cls(int(row["step"]), int(row["stage_index"]), row["stage"], row["kind"], row["env"], int(row["episodes"]),
                    float(row["score"]), float(row["reward"]) if row["reward"] else None, float(row["drop_rate"]),
-                   float(row["median_solved_steps"]), row["best"] == "1")
+                   float(row["median_solved_steps"]), row["best"] == "1", int(row.get("first_seed") or 0),
+                   json.loads(row["by_direction"]) if row.get("by_direction") else None)
 
 
 def append_evaluations(path: Path, records: Iterable[EvaluationRecord]) -> None:
+    """Add rows; a run begun before the last columns existed keeps its header, and its rows match it."""
     new = not path.exists()
+    n_columns = len(EVALUATION_COLUMNS) if new else len(_header(path))
     with path.open("a", newline="") as file:
         writer = csv.writer(file)
         if new:
             writer.writerow(EVALUATION_COLUMNS)
-        writer.writerows(record.to_row() for record in records)
+        writer.writerows(record.to_row()[:n_columns] for record in records)
 
 
 def read_evaluations(path: Path) -> list[EvaluationRecord]:

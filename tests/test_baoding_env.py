@@ -224,6 +224,18 @@ def test_start_angle_list_draws_one_of_its_angles_per_reset():
         BaodingEnv(start_angle=[])
 
 
+def test_direction_list_draws_only_its_members():
+    # The 2022 winner's `task: random` drew cw or ccw (MyoSuite had no hold before v1.2.3).
+    env = BaodingEnv(direction=["cw", "ccw"], period=20.0, start_angle="uniform", horizon=2)
+    drawn = []
+    for seed in range(60):
+        env.reset(seed=seed)
+        drawn.append(env.task.direction)
+    assert set(drawn) == {"cw", "ccw"} and 20 <= drawn.count("cw") <= 40
+    env.configure(direction="random", period=20.0, start_angle="uniform")
+    assert {env.reset(seed=seed) and env.task.direction for seed in range(30)} == {"hold", "cw", "ccw"}
+
+
 def test_truncates_at_horizon():
     env = BaodingEnv(drop_height=-10.0, horizon=30)
     env.reset(seed=0)
@@ -289,6 +301,9 @@ def test_configure_replaces_distribution_from_preset():
 @pytest.mark.parametrize("knobs,message", [
     ({"directon": "cw"}, "did you mean 'direction'"),
     ({"direction": "sideways"}, "not one of hold, cw, ccw, random"),
+    ({"direction": ["cw", "hold", "cw"]}, "repeats a direction"),
+    ({"direction": ["cw", "random"]}, "direction[1]: 'random' is not one of hold, cw, ccw"),
+    ({"direction": []}, "empty list"),
     ({"period": [6, 4]}, "reversed"),
     ({"period": []}, "a range is [low, high]"),
     ({"period": -1}, "must be > 0"),
@@ -594,3 +609,20 @@ def test_chained_goals_move_the_targets_along_their_orbit(direction, sign):
     np.testing.assert_array_equal(starts, again)
     for preset in ("p1", "p1_2022", "p2"):
         assert BaodingEnv(preset).knobs.goal_chain is None
+
+
+def test_the_winner_chain_rotates_clockwise_or_counter_clockwise_never_holds():
+    """curricula/baoding_sds.yaml's stages 02-12 (the winner's `task: random`, which drew from
+    MyoSuite's cw/ccw enum before v1.2.3 added hold) never draw a hold episode."""
+    from pathlib import Path
+
+    from myo_sds.curricula.schema import load_curriculum
+
+    curriculum = load_curriculum(Path(__file__).resolve().parents[1] / "curricula" / "baoding_sds.yaml")
+    rotating = [s for s in curriculum.stages if s.name.startswith(("rotate-", "fixed-"))]
+    assert len(rotating) == 10  # their 02-05 and 06-12, their two 7 s runs as one stage
+    env = BaodingEnv(distribution=rotating[0].distribution, horizon=2)
+    for stage in rotating:
+        env.configure(distribution=stage.distribution)
+        drawn = [env.reset(seed=seed) and env.task.direction for seed in range(24)]
+        assert set(drawn) == {"cw", "ccw"}, stage.name

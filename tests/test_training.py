@@ -375,12 +375,16 @@ def _train_with_stage_evaluation(tmp_path, advance_extra: str = "", evaluate_ext
     return run, state
 
 
-def _evaluated_again(policy) -> float:
-    """The policy's score evaluated as the stage evaluation does (stage 1, noise 0.02, seeds 0-2)."""
+def _evaluated_again(policy, run, step: int) -> float:
+    """The policy's score evaluated as ``run``'s stage evaluation at ``step`` did (stage 1, noise
+    0.02, three episodes from the evaluation's first seed: new seeds at every evaluation)."""
     from myo_sds import evaluation as ev
 
+    (record,) = [e for e in RunFolder(run).read_evaluations() if e.step == step and e.kind != "probe"]
+    assert record.first_seed == step  # seeds: fresh
     ref = ev.resolve_checkpoint(policy)
-    return ev.evaluate(ref, ev.choose_env(ref, "stage:easy", start_noise=0.02), episodes=3, seed=0).summary()["score"]
+    return ev.evaluate(ref, ev.choose_env(ref, "stage:easy", start_noise=0.02), episodes=3,
+                       seed=record.first_seed).summary()["score"]
 
 
 def test_a_stage_evaluates_periodically_and_hands_its_best_policy_to_the_next(tmp_path, capsys):
@@ -396,7 +400,8 @@ def test_a_stage_evaluates_periodically_and_hands_its_best_policy_to_the_next(tm
     assert easy.best_evaluated == pytest.approx(max(scores))
     assert easy.handed_off_step is None or easy.handed_off_step < easy.at_step
     # The final model is the best evaluated one: evaluated again the same way, it scores the best.
-    assert _evaluated_again(run) == pytest.approx(easy.best_evaluated, abs=1e-12)
+    best_step = easy.handed_off_step or easy.at_step
+    assert _evaluated_again(run, run, best_step) == pytest.approx(easy.best_evaluated, abs=1e-12)
     text = format_summary(summarize(run))
     assert f"best {easy.best_evaluated:.3f}" in text and "handed on" in text
     # Older best policies are pruned once a checkpoint no longer names them.
@@ -419,7 +424,8 @@ def test_a_stage_s_best_evaluated_policy_exports_as_a_model_folder(tiny_run, tmp
     assert exported.stage_episodes == len(logged) < state.stage_episodes
     assert exported.wall_s == logged[-1].wall_s
     # Evaluated again the same way, it scores the stage's best.
-    assert _evaluated_again(tmp_path / "best") == pytest.approx(state.best_evaluated, abs=1e-12)
+    assert _evaluated_again(tmp_path / "best", run, state.best_evaluated_step) == pytest.approx(
+        state.best_evaluated, abs=1e-12)
     card = (tmp_path / "best" / "README.md").read_text()
     assert f"at {state.best_evaluated_step:,} env steps" in card
     assert f"the stage's best evaluated policy (score {state.best_evaluated:.3f}" in card
@@ -520,7 +526,9 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
     assert easy.probe.pop("env") == "stage:hard"
     assert easy.probe == pytest.approx({"episodes": 6, "score": probes[0].score, "reward": probes[0].reward,
                                         "drop_rate": probes[0].drop_rate,
-                                        "median_solved_steps": probes[0].median_solved_steps}, rel=1e-5)
+                                        "median_solved_steps": probes[0].median_solved_steps,
+                                        "first_seed": 0}, rel=1e-5)  # the probe replays seeds 0 ..
+    assert probes[0].by_direction == by_direction  # evaluations.csv keeps them too
     # The probe's episodes by direction (the stage draws hold, cw or ccw): they add up.
     assert set(by_direction) <= {"hold", "cw", "ccw"} and len(by_direction) >= 2
     assert sum(v["episodes"] for v in by_direction.values()) == 6
@@ -542,8 +550,8 @@ def test_an_evaluation_gate_a_stage_end_probe_and_the_rest_start_log(tmp_path):
     text = format_summary(summary)
     assert "balls at rest" in text and "stage-end probe" in text and "eval return" in text
     first = next(iter(by_direction))
-    assert (f"; by direction: {first} {by_direction[first]['episodes']}, median "
-            f"{by_direction[first]['median_solved_steps']:.0f}") in text
+    assert (f"; by direction: {first} {by_direction[first]['episodes']}, return {by_direction[first]['reward']:.0f}, "
+            f"median {by_direction[first]['median_solved_steps']:.0f}") in text
     assert f"stage 2, its {sum(v['episodes'] for v in rest_sectors.values())} episodes begun with the balls at rest" in text
     # The current stage passes on its evaluations; its trend is its training episodes' score.
     assert "stage 2 trend (training score over" in text

@@ -240,11 +240,13 @@ def _status_line(summary: RunSummary, now: float) -> str:
 
 
 def describe_directions(by_direction: dict[str, dict] | None) -> str:
-    """``; by direction: ccw 7, median 5, 86% dropped; ...`` (empty for one direction or none)."""
+    """``; by direction: ccw 7, return 412, median 5, 86% dropped; ...`` (empty for one direction
+    or none; the return where it was recorded)."""
     if not by_direction or len(by_direction) < 2:
         return ""
     return "; by direction: " + "; ".join(
-        f"{d} {v['episodes']}, median {v['median_solved_steps']:.0f}, {v['drop_rate']:.0%} dropped"
+        f"{d} {v['episodes']}" + (f", return {v['reward']:.0f}" if v.get("reward") is not None else "")
+        + f", median {v['median_solved_steps']:.0f}, {v['drop_rate']:.0%} dropped"
         for d, v in by_direction.items())
 
 

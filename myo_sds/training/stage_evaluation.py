@@ -4,8 +4,9 @@ stage's or a preset, scored as ``evaluate.py`` scores them and logged to the run
 ``evaluations.csv``.
 
 It reads the model and the current normalization statistics and draws nothing from the
-training's random streams (its envs are its own, reset with seeds 0 .. episodes-1), so a run
-with evaluations trains exactly as one without them. Its episodes run together, one batched
+training's random streams (its envs are its own, reset with seeds ``first .. first + episodes -
+1``: the env step of the evaluation with ``seeds: fresh``, 0 with ``fixed`` and for the probe), so
+a run with evaluations trains exactly as one without them. Its episodes run together, one batched
 forward pass per step and the envs stepped on every CPU (about twice as fast as one at a time:
 the training's envs and update wait meanwhile); ``evaluate.py --env stage:NAME`` plays the same
 seeds one at a time, the same episodes up to the last bits of the batched arithmetic.
@@ -40,24 +41,25 @@ class EvaluationResult:
     reward: float | None
     drop_rate: float
     median_solved_steps: float
-    # Baoding: per direction (hold, cw, ccw), its episodes, median solved steps and drop rate; a
-    # policy may pick the balls up from rest one way and not the other.
+    # Baoding: per direction (hold, cw, ccw), its episodes, mean return, median solved steps and
+    # drop rate; a policy may pick the balls up from rest one way and not the other.
     by_direction: dict[str, dict] | None = None
+    first_seed: int = 0  # the episodes' seeds: first_seed .. first_seed + episodes - 1
 
     @classmethod
-    def of(cls, env: str, results: list[EpisodeResult]) -> EvaluationResult:
-        rewards = [r.reward for r in results if r.reward is not None]
-        by_direction = {d: {"episodes": len(group), "median_solved_steps": float(np.median([r.solved_steps for r in group])),
+    def of(cls, env: str, results: list[EpisodeResult], first_seed: int = 0) -> EvaluationResult:
+        by_direction = {d: {"episodes": len(group), "reward": _mean_reward(group),
+                            "median_solved_steps": float(np.median([r.solved_steps for r in group])),
                             "drop_rate": drop_rate(group)}
                         for d in sorted({r.direction for r in results if r.direction})
                         for group in [[r for r in results if r.direction == d]]}
-        return cls(env, len(results), official_score(results),
-                   float(np.mean(rewards)) if len(rewards) == len(results) else None, drop_rate(results),
-                   float(np.median([r.solved_steps for r in results])), by_direction or None)
+        return cls(env, len(results), official_score(results), _mean_reward(results), drop_rate(results),
+                   float(np.median([r.solved_steps for r in results])), by_direction or None, first_seed)
 
     def as_dict(self) -> dict:
         values = {"env": self.env, "episodes": self.episodes, "score": self.score, "reward": self.reward,
-                  "drop_rate": self.drop_rate, "median_solved_steps": self.median_solved_steps}
+                  "drop_rate": self.drop_rate, "median_solved_steps": self.median_solved_steps,
+                  "first_seed": self.first_seed}
         return values | ({"by_direction": self.by_direction} if self.by_direction else {})
 
     def describe(self) -> str:
@@ -65,6 +67,11 @@ class EvaluationResult:
         text = (f"score {self.score:.3f}, median solved steps {self.median_solved_steps:.0f}, "
                 f"{self.drop_rate:.0%} dropped ({self.episodes} episodes)")
         return text + describe_directions(self.by_direction)
+
+
+def _mean_reward(results: list[EpisodeResult]) -> float | None:
+    rewards = [r.reward for r in results if r.reward is not None]
+    return float(np.mean(rewards)) if rewards and len(rewards) == len(results) else None
 
 
 # Episodes run together at most: each needs its own env (~64 MB for the MyoHand), and 20 (the
@@ -98,8 +105,8 @@ class StageEvaluator:
     def choice(self, stage: Stage) -> EnvChoice:
         return self._choice(stage.evaluate.env, stage, stage.evaluate.start_noise)
 
-    def run(self, model, venv, choice: EnvChoice, episodes: int) -> EvaluationResult:
-        """``episodes`` deterministic episodes (seeds 0 ..) of ``model``, its observations
+    def run(self, model, venv, choice: EnvChoice, episodes: int, first_seed: int = 0) -> EvaluationResult:
+        """``episodes`` deterministic episodes (seeds ``first_seed`` ..) of ``model``, its observations
         normalized by ``venv``'s current statistics, run together (``run_episodes_together``)."""
         key = (choice.name, choice.start_noise)
         if self._envs_key != key:  # a stage's own task, or a probe's: only one set is kept
@@ -116,21 +123,23 @@ class StageEvaluator:
         torch.set_num_threads(1)
         try:
             results = []
-            for first in range(0, episodes, TOGETHER):
-                seeds = range(first, min(first + TOGETHER, episodes))
+            for first in range(first_seed, first_seed + episodes, TOGETHER):
+                seeds = range(first, min(first + TOGETHER, first_seed + episodes))
                 results += run_episodes_together(policy, envs[:len(seeds)], choice, seeds, self._pool)
         finally:
             torch.set_num_threads(threads)
-        return EvaluationResult.of(choice.name, results)
+        return EvaluationResult.of(choice.name, results, first_seed)
 
-    def score(self, model, venv, stage: Stage) -> float:
-        """The mean official score of the stage's evaluation episodes."""
-        return self.run(model, venv, self.choice(stage), stage.evaluate.episodes).score
+    @staticmethod
+    def first_seed(stage: Stage, step: int) -> int:
+        """The first seed of the stage's evaluation at env step ``step`` (``seeds: fresh``: the step)."""
+        return step if stage.evaluate.seeds == "fresh" else 0
 
     def evaluate(self, model, venv, stage: Stage, state: CurriculumState, folder, kind: str = "periodic") -> str:
         """The stage's evaluation at the current step: logged, recorded in ``state`` and the run's
         ``evaluations.csv``, a new best policy kept in the run folder. Returns the line to print."""
-        result = self.run(model, venv, self.choice(stage), stage.evaluate.episodes)
+        result = self.run(model, venv, self.choice(stage), stage.evaluate.episodes,
+                          self.first_seed(stage, state.num_timesteps))
         self._last_step = state.num_timesteps
         best = state.record_evaluation(result.score, result.reward, stage.evaluate.select)
         if best:
@@ -161,7 +170,8 @@ class StageEvaluator:
     def _record(result: EvaluationResult, state: CurriculumState, stage: Stage, kind: str,
                 best: bool) -> EvaluationRecord:
         return EvaluationRecord(state.num_timesteps, state.stage_index, stage.name, kind, result.env, result.episodes,
-                                result.score, result.reward, result.drop_rate, result.median_solved_steps, best)
+                                result.score, result.reward, result.drop_rate, result.median_solved_steps, best,
+                                result.first_seed, result.by_direction)
 
     def hand_off(self, model, venv, stage: Stage, state: CurriculumState, folder) -> tuple[int | None, str]:
         """At the stage's end, with ``hand_off: best``: evaluate the last policy too (unless it just
