@@ -18,6 +18,7 @@ VEC_ENVS = ("thread", "dummy", "subproc")
 DEVICES = ("cpu", "cuda", "auto")
 ROLLOUT_BACKENDS = ("local", "ray")
 EXPLORATIONS = ("gaussian", "lattice")
+MEMORIES = ("lstm", "none")
 
 
 _positive_rate = number(low=0, strict_low=True)
@@ -97,8 +98,19 @@ class PolicyConfig:
     lstm_hidden_size: int = setting(256, parse=integer(low=1), help="units of each LSTM")
     enable_critic_lstm: bool = setting(True, parse=boolean, help="a separate LSTM for the critic")
     net_arch: tuple[int, ...] = setting((256, 256), parse=layers, help="layers after each LSTM ([]: none)")
+    critic_net_arch: tuple[int, ...] | None = setting(
+        None, parse=optional(layers), help="the critic's layers, where they differ from net_arch (null: net_arch)")
+    memory: str = setting(
+        "lstm", parse=one_of(*MEMORIES),
+        help="lstm | none: no LSTM, the layers read the observation itself (a feed-forward policy and critic, "
+             "as PKU-MARL's 2022 die MLP; lstm_hidden_size is then ignored; needs fast_lstm_update)")
     activation: str = setting("relu", parse=one_of(*ACTIVATIONS), help="activation of those layers")
     log_std_init: float = setting(-2.0, parse=number(), help="initial log standard deviation of the action noise")
+    log_std_min: float | None = setting(
+        None, parse=optional(number()),
+        help="floor of the action noise's log standard deviation (null: none): Gaussian, each muscle's std never "
+             "falls below exp(floor) (the parameter is held at the floor after every update, as mjrl's "
+             "min_log_std); Lattice, each muscle's independent part likewise (needs fast_lstm_update)")
     ortho_init: bool = setting(True, parse=boolean, help="orthogonal initialization of the networks")
     fast_lstm_update: bool = setting(
         True, parse=boolean, help="one LSTM call per sequence in updates (same function, faster); false: "
@@ -125,7 +137,7 @@ class PolicyConfig:
 
     def __post_init__(self) -> None:  # rules between the fields (parse_settings names the key)
         fast_only = {"action_mean_bound": 0.0, "action_head_lr_scale": 1.0, "exploration": "gaussian",
-                     "critic_extra": ()}
+                     "critic_extra": (), "log_std_min": None, "memory": "lstm"}
         for key, default in fast_only.items():
             if getattr(self, key) != default and not self.fast_lstm_update:
                 raise ValueError(f"{key}: needs policy.fast_lstm_update: true (it lives in the fast policy class)")
@@ -134,6 +146,14 @@ class PolicyConfig:
                 if getattr(self, key) != fast_only[key]:
                     raise ValueError(f"{key}: applies to the Gaussian policy's mean only; with exploration: lattice "
                                      "leave it at its default")
+        if self.log_std_min is not None and self.log_std_init < self.log_std_min:
+            raise ValueError(f"log_std_min: {self.log_std_min} is above log_std_init {self.log_std_init}; the noise "
+                             "would start below its floor")
+        if self.memory == "none" and self.critic_extra:
+            raise ValueError("critic_extra: needs memory: lstm (the actor and critic then read different inputs)")
+        if self.memory == "none" and not self.enable_critic_lstm:
+            raise ValueError("enable_critic_lstm: memory: none passes the observation to the critic's layers through "
+                             "the critic's own (unused) LSTM; leave it true")
 
 
 @dataclass(frozen=True)

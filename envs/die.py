@@ -190,6 +190,8 @@ class DieEnv(MuscleHandEnv):
             "pos_dist": -pos_dist,
             "rot_dist": -rot_dist,
             "rot_kernel": k.rotation_kernel_width / (rot_dist**2 + k.rotation_kernel_width),
+            "pos_kernel": 1.0 / (1.0 + pos_dist**2),
+            "rot_shaped": -0.5 * rot_dist + 0.5 / (1.0 + rot_dist**2),
             "tip_dist": -float(np.sqrt((tips**2).sum(axis=1)).sum()),
             "die_speed": -vector_norm(data.qvel[self._die_dofs]),
             "bonus": float(pos_dist < 2 * k.position_threshold) + float(pos_dist < k.position_threshold),

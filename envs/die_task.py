@@ -35,12 +35,15 @@ HORIZON = 150  # control steps of 10 ms
 FRAME_SKIP = 5
 N_HAND_JOINTS = 23
 # The official terms, then shaping terms of 2022 entries (PKU-MARL): the rotation error through a
-# bounded kernel w / (d^2 + w) (1 on the goal, half at d = sqrt(w)), the summed fingertip-to-die
-# distance and the die's speed (both negative). ``solved`` weighted is a bonus per solved step;
-# ``alive`` is 1 on every step the die is held: with negative distance terms alone, dropping the
-# die ends their stream and pays (experiments/RESULTS.md, session of 2026-12-07 (II)).
+# bounded kernel w / (d^2 + w) (1 on the goal, half at d = sqrt(w); their phase-2 work), the summed
+# fingertip-to-die distance and the die's speed (both negative). ``solved`` weighted is a bonus per
+# solved step; ``alive`` is 1 on every step the die is held: with negative distance terms alone,
+# dropping the die ends their stream and pays (experiments/RESULTS.md, session of 2026-12-07 (II)).
+# PKU-MARL's phase-1 terms (their reorient_v0.py at commit cb992b2, 2022-10-22, the policy that
+# scored 71%): ``pos_kernel`` = 1 / (1 + d^2) of the position error d in m (~1 on every held step,
+# so in effect an alive bonus) and ``rot_shaped`` = -0.5 r + 0.5 / (1 + r^2) of the rotation error r.
 REWARD_TERMS = ("pos_dist", "rot_dist", "bonus", "act_reg", "penalty", "sparse", "solved", "done",
-                "rot_kernel", "tip_dist", "die_speed", "alive")
+                "rot_kernel", "tip_dist", "die_speed", "alive", "pos_kernel", "rot_shaped")
 
 
 # Features of the simulation the official observation leaves out, by name: (size, meaning); a

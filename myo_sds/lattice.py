@@ -79,10 +79,14 @@ class LatticeNoise(StateDependentNoiseDistribution):
     (the policy draws its matrices through ``reset_noise``, as for gSDE)."""
 
     def __init__(self, action_dim: int, full_std: bool = False, use_expln: bool = True, alpha: float = 1.0,
-                 std_clip: tuple[float, float] = (1e-3, 10.0), std_reg: float = 0.0, epsilon: float = 1e-6):
+                 std_clip: tuple[float, float] = (1e-3, 10.0), std_reg: float = 0.0, epsilon: float = 1e-6,
+                 min_action_std: float | None = None):
         super().__init__(action_dim, full_std=full_std, use_expln=use_expln, squash_output=False,
                          learn_features=False, epsilon=epsilon)
         self.alpha, self.std_reg = alpha, std_reg
+        # A floor on each muscle's independent noise (policy.log_std_min): u_k >= min_action_std^2,
+        # so each muscle's whole std is at least that (the latent part only adds to it).
+        self.min_action_variance = None if min_action_std is None else min_action_std**2
         self.min_std, self.max_std = std_clip
         self.mean_actions_net: nn.Linear | None = None
 
@@ -104,6 +108,7 @@ class LatticeNoise(StateDependentNoiseDistribution):
     def sample_weights(self, log_std: th.Tensor, batch_size: int = 1) -> None:
         """Draw the noise matrices: one pair, and ``batch_size`` pairs for parallel envs."""
         latent_std, action_std = self.get_std(log_std)
+        self._drawn_action_std = action_std.detach()  # what the drawn P_a's entries spread by (the floor's check)
         self.latent_weights = th.distributions.Normal(th.zeros_like(latent_std), latent_std)
         self.action_weights = th.distributions.Normal(th.zeros_like(action_std), action_std)
         self.latent_mat, self.action_mat = self.latent_weights.rsample(), self.action_weights.rsample()
@@ -126,6 +131,8 @@ class LatticeNoise(StateDependentNoiseDistribution):
         latent_variance = squared @ latent_std**2  # batch x d
         # epsilon, as gSDE adds it: a latent of zeros (a dead ReLU layer) gives no noise at all
         action_variance = squared @ action_std**2 + self.std_reg**2 + self.epsilon  # batch x A
+        if self.min_action_variance is not None:
+            action_variance = action_variance.clamp(min=self.min_action_variance)
         weight = self.mean_actions_net.weight  # A x d
         if self.full_std:
             sigma = self.alpha**2 * (weight * latent_variance[:, None, :]) @ weight.T
@@ -153,6 +160,10 @@ class LatticeNoise(StateDependentNoiseDistribution):
         latent = self._latent
         latent_noise = self._noise(latent, self.latent_mat, self.latent_matrices)
         action_noise = self._noise(latent, self.action_mat, self.action_matrices)
+        if self.min_action_variance is not None:  # the floor's share of the independent part
+            drawn = (latent.detach() ** 2) @ self._drawn_action_std**2 + self.std_reg**2 + self.epsilon
+            extra = (self.min_action_variance - drawn).clamp(min=0.0)
+            action_noise = action_noise + extra.sqrt() * th.randn_like(action_noise)
         return self.distribution.mean + self.alpha * latent_noise @ self.mean_actions_net.weight.T + action_noise
 
     def mode(self) -> th.Tensor:

@@ -18,6 +18,16 @@ as before.
 with ``action_net``'s initial parameters divided by ``scale``: the same initial policy, but
 since Adam moves each parameter by about the learning rate whatever its gradient's size, the
 output layer of the actor learns ``scale`` times as fast as the rest.
+
+``log_std_min`` (none by default) is a floor on the Gaussian's log standard deviation, as mjrl's
+``min_log_std`` (PKU-MARL's 2022 die policy never explored with a std below 0.37): the
+distribution reads ``max(log_std, floor)``, and after every optimizer step the parameter is set
+back to the floor where it fell below, so that a gradient toward more noise acts at once. With
+Lattice the floor bounds each muscle's independent variance (:class:`~myo_sds.lattice.LatticeNoise`).
+
+``memory: "none"`` makes the LSTMs pass the observation through unchanged (their states stay
+zero and their parameters unused), so the layers after them read the observation itself: a
+feed-forward actor and critic in the same training and evaluation code.
 """
 
 from __future__ import annotations
@@ -37,11 +47,19 @@ class SequenceLstmPolicy(RecurrentActorCriticPolicy):
     actor's output layer."""
 
     def __init__(self, *args, action_mean_bound: float = 0.0, action_head_lr_scale: float = 1.0,
-                 actor_observation_size: int | None = None, **kwargs):
+                 actor_observation_size: int | None = None, log_std_min: float | None = None,
+                 memory: str = "lstm", **kwargs):
+        if memory not in ("lstm", "none"):
+            raise ValueError(f"memory: {memory!r} is not one of lstm, none")
         self.action_mean_bound = action_mean_bound
         self.action_head_lr_scale = action_head_lr_scale
         self.actor_observation_size = actor_observation_size
+        self.log_std_min = log_std_min
+        self.memory = memory
         super().__init__(*args, **kwargs)
+        if memory == "none" and self.lstm_output_dim != self.features_dim:
+            raise ValueError(f"memory: none passes the observation through: lstm_hidden_size must be its size "
+                             f"{self.features_dim}, got {self.lstm_output_dim}")
         with th.no_grad():  # the same initial function as without the scale
             self.action_net.weight.div_(action_head_lr_scale)
             self.action_net.bias.div_(action_head_lr_scale)
@@ -56,25 +74,48 @@ class SequenceLstmPolicy(RecurrentActorCriticPolicy):
                                          **self.lstm_kwargs)
             self.optimizer = self.optimizer_class(self.parameters(), lr=self.optimizer.defaults["lr"],
                                                   **self.optimizer_kwargs)
+        self._hold_noise_floor()
+
+    def _hold_noise_floor(self) -> None:
+        """With a Gaussian floor: the parameter at or above it now and after every optimizer step."""
+        if self.log_std_min is None or self.use_sde:
+            return
+        self._floor_log_std()
+        self.optimizer.register_step_post_hook(self._floor_log_std)
+
+    def _floor_log_std(self, *_hook_args) -> None:
+        with th.no_grad():
+            self.log_std.clamp_(min=self.log_std_min)
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        result = super().load_state_dict(state_dict, strict=strict, assign=assign)
+        if self.log_std_min is not None and not self.use_sde:
+            self._floor_log_std()  # a policy trained without the floor starts at it
+        return result
 
     def _get_constructor_parameters(self) -> dict:
         return {**super()._get_constructor_parameters(), "action_mean_bound": self.action_mean_bound,
                 "action_head_lr_scale": self.action_head_lr_scale,
-                "actor_observation_size": self.actor_observation_size}
+                "actor_observation_size": self.actor_observation_size, "log_std_min": self.log_std_min,
+                "memory": self.memory}
 
     def _get_action_dist_from_latent(self, latent_pi: th.Tensor):
-        if not self.action_mean_bound and self.action_head_lr_scale == 1.0:
+        gaussian_floor = self.log_std_min is not None and not self.use_sde
+        if not self.action_mean_bound and self.action_head_lr_scale == 1.0 and not gaussian_floor:
             return super()._get_action_dist_from_latent(latent_pi)
         mean_actions = self.action_net(latent_pi) * self.action_head_lr_scale
         if self.action_mean_bound:
             bound = self.action_mean_bound
             mean_actions = bound * th.tanh(mean_actions / bound)
-        return self.action_dist.proba_distribution(mean_actions, self.log_std)
+        log_std = self.log_std.clamp(min=self.log_std_min) if gaussian_floor else self.log_std
+        return self.action_dist.proba_distribution(mean_actions, log_std)
 
     def _process_sequence(self, features: th.Tensor, lstm_states: tuple[th.Tensor, th.Tensor],
                           episode_starts: th.Tensor, lstm: th.nn.LSTM) -> tuple[th.Tensor, th.Tensor]:
         if features.shape[-1] != lstm.input_size:  # the actor of a privileged critic: the official part
             features = features[..., :lstm.input_size]
+        if self.memory == "none":
+            return features, lstm_states
         return self.sequence_pass(features, lstm_states, episode_starts, lstm)
 
     @staticmethod
@@ -99,6 +140,8 @@ class LatticeLstmPolicy(SequenceLstmPolicy):
 
     def __init__(self, observation_space, action_space, lr_schedule, *args, lattice_alpha: float = 1.0,
                  lattice_std_reg: float = 0.0, lattice_std_clip: tuple[float, float] = (1e-3, 10.0), **kwargs):
+        import math
+
         from stable_baselines3.common.preprocessing import get_action_dim
 
         from myo_sds.lattice import LatticeNoise
@@ -112,7 +155,8 @@ class LatticeLstmPolicy(SequenceLstmPolicy):
             raise ValueError("LatticeLstmPolicy needs use_sde=True (RecurrentPPO(..., use_sde=True))")
         self.action_dist = LatticeNoise(get_action_dim(action_space), full_std=self.dist_kwargs["full_std"],
                                         use_expln=self.dist_kwargs["use_expln"], alpha=lattice_alpha,
-                                        std_clip=self.lattice_std_clip, std_reg=lattice_std_reg)
+                                        std_clip=self.lattice_std_clip, std_reg=lattice_std_reg,
+                                        min_action_std=None if self.log_std_min is None else math.exp(self.log_std_min))
         self._build(lr_schedule)  # the action layer and log_std of the Lattice distribution, a new optimizer
 
     def _get_constructor_parameters(self) -> dict:

@@ -246,6 +246,34 @@ def test_shaping_terms_match_hand_computed_values_and_leave_the_score_alone():
             break
 
 
+def test_pku_phase_one_terms_match_hand_computed_values():
+    """PKU-MARL's 2022 phase-1 reward (reorient_v0.py at cb992b2): pos 3 x 1/(1 + d^2), rot
+    1 x (-0.5 r + 0.5/(1 + r^2)), die speed 1 x -|v|, fingertips 0.3 x -(sum of distances), solved
+    3, drop 1 x -1; checked at hand-picked errors and along an episode."""
+    weights = {"pos_kernel": 3.0, "rot_shaped": 1.0, "die_speed": 1.0, "tip_dist": 0.3, "solved": 3.0, "penalty": 1.0}
+    env = DieEnv(reward_weights=weights)
+    obs, _ = env.reset(seed=2)
+    # By hand: at d = 0.1 m, 1/(1 + 0.01) = 0.990099; at r = 1 rad, -0.5 + 0.5/2 = -0.25.
+    env._obs[51:54], env._obs[60:63] = (0.1, 0.0, 0.0), (0.6, 0.8, 0.0)
+    terms = env._reward_terms()
+    assert terms["pos_kernel"] == pytest.approx(0.990099, abs=1e-6)
+    assert terms["rot_shaped"] == pytest.approx(-0.25)
+    env._obs[51:54], env._obs[60:63] = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    terms = env._reward_terms()
+    assert (terms["pos_kernel"], terms["rot_shaped"]) == (1.0, 0.5)  # on the goal: the most either pays
+    env.reset(seed=2)
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        obs, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, 39))
+        d, r = np.linalg.norm(obs[51:54]), np.linalg.norm(obs[60:63])
+        assert info["pos_kernel"] == pytest.approx(1 / (1 + d**2))
+        assert info["rot_shaped"] == pytest.approx(-0.5 * r + 0.5 / (1 + r**2))
+        assert info["penalty"] == -float(d > 0.2)
+        assert reward == pytest.approx(sum(w * info[k] for k, w in weights.items()))
+        if terminated or truncated:
+            break
+
+
 def test_alive_is_one_on_each_step_the_die_is_held_and_zero_on_the_drop():
     """alive = 1 while the die is within drop_threshold of the goal, 0 on the step it is dropped
     (the episode ends there); a tight threshold makes the hand drop it within a few steps."""

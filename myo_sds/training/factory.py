@@ -86,11 +86,13 @@ def build_model(config: RunConfig, venv, settings: PpoSettings):
     activations = {"relu": torch.nn.ReLU, "tanh": torch.nn.Tanh, "elu": torch.nn.ELU,
                    "leaky_relu": torch.nn.LeakyReLU}
     policy, ppo = config.policy, config.ppo
+    critic_layers = policy.net_arch if policy.critic_net_arch is None else policy.critic_net_arch
     policy_kwargs = {
-        "lstm_hidden_size": policy.lstm_hidden_size,
+        # Without memory the "LSTMs" pass the observation through, so their width is its size.
+        "lstm_hidden_size": venv.observation_space.shape[0] if policy.memory == "none" else policy.lstm_hidden_size,
         "enable_critic_lstm": policy.enable_critic_lstm,
         "shared_lstm": False,
-        "net_arch": {"pi": list(policy.net_arch), "vf": list(policy.net_arch)},
+        "net_arch": {"pi": list(policy.net_arch), "vf": list(critic_layers)},
         "activation_fn": activations[policy.activation],
         "log_std_init": policy.log_std_init,
         "ortho_init": policy.ortho_init,
@@ -99,6 +101,8 @@ def build_model(config: RunConfig, venv, settings: PpoSettings):
     if policy.fast_lstm_update:
         policy_kwargs["action_mean_bound"] = policy.action_mean_bound
         policy_kwargs["action_head_lr_scale"] = policy.action_head_lr_scale
+        policy_kwargs["log_std_min"] = policy.log_std_min
+        policy_kwargs["memory"] = policy.memory
     if policy.critic_extra:  # the actor reads the official observation, the first part of the env's
         policy_kwargs["actor_observation_size"] = TASK_SPECS[config.curriculum.task].env_class().OBS_SIZE
     if lattice:
