@@ -200,11 +200,18 @@ class PpoConfig:
         None, parse=optional(number(low=0, strict_low=True)),
         help="SB3's early stop: an update ends its epochs at the first minibatch whose approximate KL from the "
              "rollout's policy exceeds 1.5 x this; null: all n_epochs always run")
+    sequence_length: int | None = setting(
+        None, parse=optional(integer(low=1)),
+        help="null: the update's LSTM sequences run to an episode's or minibatch's end (sb3-contrib's); N: they "
+             "are also cut every N steps, each piece starting from the LSTM state the rollout had there (the same "
+             "values, gradients truncated at the cuts; far less padding where episode lengths differ; needs "
+             "fast_lstm_update)")
     warmup: PpoWarmup = setting(PpoWarmup(), parse=ppo_warmup, help="{steps, n_steps, batch_size, n_epochs}")
 
 
 # The PPO settings a curriculum stage may change (from its start until a later stage changes them).
-STAGE_PPO_SETTINGS = ("learning_rate", "n_steps", "batch_size", "n_epochs", "clip_range", "ent_coef", "target_kl")
+STAGE_PPO_SETTINGS = ("learning_rate", "n_steps", "batch_size", "n_epochs", "clip_range", "ent_coef", "target_kl",
+                      "sequence_length")
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ class PpoSettings:
     clip_range: float
     ent_coef: float
     target_kl: float | None = None  # SB3's early stop of an update's epochs (None: all epochs)
+    sequence_length: int | None = None  # the update's LSTM sequences cut every this many steps (None: not)
 
 
 def ppo_settings_at(config: RunConfig, stage_index: int, stage_starts: Sequence[int], step: int) -> PpoSettings:

@@ -355,6 +355,9 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     origins = {dotted: reader.origin(dotted) for dotted in _flat_keys(raw)}
     config = RunConfig(curriculum=curriculum, curriculum_path=curriculum_path, source=raw, origins=origins, **values)
     _check_batch_sizes(reader, config, path)
+    cut = config.ppo.sequence_length or any(stage.ppo.as_dict().get("sequence_length") for stage in curriculum.stages)
+    if cut and not config.policy.fast_lstm_update:
+        raise reader.error("ppo.sequence_length", "needs policy.fast_lstm_update: true (the fast update's buffer cuts them)")
     return config
 
 

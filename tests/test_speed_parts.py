@@ -197,3 +197,18 @@ def test_the_padded_buffer_gives_sb3_contribs_minibatches(batch_size, episode_st
                     assert all(th.equal(x, y) for x, y in zip(a, b))
             else:
                 assert th.equal(getattr(mine, name), getattr(theirs, name)), name
+
+
+def test_sequences_cut_every_n_steps_start_where_the_rollout_was():
+    """ppo.sequence_length: by hand, a minibatch of 10 steps with an episode start at step 6, cut
+    every 4 steps: sequences [0-3], [4-5], [6-9] (the third cut at 6 + 4 = 10 is past the end)."""
+    from myo_sds.rollout_buffer import padded_layout
+
+    starts = np.zeros(10, bool)
+    starts[6] = True
+    first, index, real = padded_layout(starts, np.zeros(10, bool), max_length=4)
+    assert first.tolist() == [0, 4, 6]
+    assert index.tolist() == [[0, 1, 2, 3], [4, 5, 0, 0], [6, 7, 8, 9]]
+    assert real.sum() == 10 and real.tolist()[1] == [True, True, False, False]
+    first, index, _ = padded_layout(starts, np.zeros(10, bool))  # uncut: two sequences, padded to 6
+    assert first.tolist() == [0, 6] and index.shape == (2, 6)

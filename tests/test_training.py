@@ -466,15 +466,18 @@ def test_a_run_folder_that_holds_anything_is_refused_unless_overwritten(tmp_path
     assert RunFolder.claim(tmp_path / "new" / "run").path.is_dir()
 
 
-@pytest.mark.parametrize("exploration", ["gaussian", "lattice"])
-def test_the_update_recomputes_the_rollout_s_log_probabilities_before_any_step(tmp_path, exploration):
+@pytest.mark.parametrize("exploration, sequence_length", [("gaussian", None), ("lattice", None), ("gaussian", 5)])
+def test_the_update_recomputes_the_rollout_s_log_probabilities_before_any_step(tmp_path, exploration, sequence_length):
     """PPO's ratio starts at exactly 1: the update's minibatches (their LSTM states, episode
-    starts and padding) replay what the rollout computed. A mismatch would clip samples for nothing."""
+    starts and padding, and sequences cut every few steps) replay what the rollout computed. A
+    mismatch would clip samples for nothing."""
     from myo_sds.sb3_internals import start_training
 
-    trainer = CurriculumTrainer.start(write_config(tmp_path, total=100_000), (f"policy.exploration={exploration}",),
+    overrides = (f"policy.exploration={exploration}", f"ppo.sequence_length={sequence_length or 'null'}")
+    trainer = CurriculumTrainer.start(write_config(tmp_path, total=100_000), overrides,
                                       run_dir=tmp_path / "run", progress=False)
     model = trainer.model
+    assert model.rollout_buffer.max_sequence_length == sequence_length
     start_training(model, 100_000, trainer.episode_callback)
     assert trainer.rollouts.collect(model, trainer.episode_callback)
     model.policy.set_training_mode(False)

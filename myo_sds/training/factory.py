@@ -304,3 +304,5 @@ def apply_ppo_settings(model, settings: PpoSettings) -> None:
     if settings.n_steps != model.n_steps:
         resize_rollout_buffer(model, settings.n_steps)
     use_padded_buffer(model)
+    if hasattr(model.rollout_buffer, "max_sequence_length"):
+        model.rollout_buffer.max_sequence_length = settings.sequence_length
