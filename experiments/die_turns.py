@@ -6,9 +6,12 @@ at the end, the position error at the end, solved steps and whether the die fell
 grouped by the start's error in 15-degree bins. A policy that only holds the die shows a smallest
 error equal to the start's; one that turns it, a smallest error below it. The step at which the
 smallest error came (median) and the error at ``--at-step`` (e.g. a stage's training horizon)
-say whether the turn stops there.
+say whether the turn stops there. Each episode's turn is also cut into strokes (``strokes``):
+how many separate turns toward the goal it made, and when the second began (a regrasp).
 
     python experiments/die_turns.py ~/runs/die_p1-s0 --load-checkpoint 3000000 --env stage:rotate-30deg
+
+``experiments/die_yardstick.py`` plays PKU-MARL's 2022 policy through the same trace.
 """
 
 from __future__ import annotations
@@ -19,6 +22,8 @@ set_process_environment()  # before NumPy, torch and MuJoCo load: pinned kernels
 
 import argparse
 import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -26,6 +31,84 @@ from myo_sds.evaluation.checkpoints import choose_env, load_policy, resolve_chec
 from myo_sds.evaluation.episodes import make_env
 
 BIN_DEG = 15
+# A stroke: a run of steps over which the orientation error (smoothed over 5 steps) falls by at
+# least STROKE_RATE per step, gaps of up to STROKE_GAP steps allowed, falling STROKE_MIN in all.
+STROKE_RATE = math.radians(0.3)
+STROKE_GAP = 3
+STROKE_MIN = math.radians(8.0)
+
+
+@dataclass(frozen=True)
+class TurnRecord:
+    """One episode's turn: errors in rad, position in m, steps counted from 0."""
+
+    start_error: float
+    smallest_error: float
+    end_error: float
+    end_position: float
+    solved_steps: int
+    dropped: bool
+    score: float
+    smallest_at: int
+    error_at_step: float
+    strokes: int
+    second_stroke_at: int | None  # the step the second stroke began (a regrasp), if any
+
+
+def strokes(errors: Sequence[float]) -> list[tuple[int, int]]:
+    """(first step, last step) of each stroke of an episode's orientation errors."""
+    series = np.asarray(errors, dtype=float)
+    if len(series) < 3:
+        return []
+    smooth = np.convolve(np.pad(series, 2, mode="edge"), np.ones(5) / 5, mode="valid")
+    turning = np.flatnonzero(np.diff(smooth) < -STROKE_RATE) + 1
+    found, begin = [], None
+    for previous, step in zip(np.r_[-10**9, turning[:-1]], turning):
+        if begin is None or step - previous > STROKE_GAP + 1:
+            if begin is not None:
+                found.append((begin, end))
+            begin = step
+        end = step
+    if begin is not None:
+        found.append((begin, end))
+    return [(a, b) for a, b in found if smooth[max(a - 1, 0)] - smooth[b] >= STROKE_MIN]
+
+
+def turn_record(env, act: Callable, seed: int, at_step: int) -> TurnRecord:
+    """Play one episode with ``act(obs, state, episode_start) -> (action, state)`` on a die env,
+    ours or MyoSuite's (errors are read from the observation: the same layout on both)."""
+    obs, _ = env.reset(seed=seed)
+    errors, state, start, solved, dropped = [float(np.linalg.norm(obs[60:63]))], None, True, 0, False
+    while True:
+        action, state = act(obs, state, start)
+        start = False
+        obs, _, terminated, truncated, info = env.step(action)
+        errors.append(float(np.linalg.norm(obs[60:63])))
+        solved += int(bool(info["solved"]))
+        if terminated or truncated:
+            dropped = bool(terminated)
+            break
+    cuts = strokes(errors)
+    return TurnRecord(errors[0], min(errors), errors[-1], float(np.linalg.norm(obs[51:54])), solved, dropped,
+                      float(solved > 5), int(np.argmin(errors)), errors[min(at_step, len(errors) - 1)],
+                      len(cuts), cuts[1][0] if len(cuts) > 1 else None)
+
+
+def print_turn_table(rows: Sequence[TurnRecord], at_step: int) -> None:
+    """The episodes grouped by the start's orientation error in 15-degree bins."""
+    print(f"{'start error, deg':>17} {'episodes':>8} {'score':>6} {'mean start':>10} {'smallest error':>14} "
+          f"{'at step (median)':>16} {f'at step {at_step}':>11} {'end error':>9} {'end position, cm':>16} "
+          f"{'solved steps':>12} {'strokes':>7} {'2nd at':>6}")
+    bins = np.floor(np.degrees([r.start_error for r in rows]) / BIN_DEG).astype(int)
+    for k in sorted(set(bins.tolist())):
+        group = [r for r, b in zip(rows, bins) if b == k]
+        mean = lambda field: float(np.mean([getattr(r, field) for r in group]))  # noqa: E731
+        second = [r.second_stroke_at for r in group if r.second_stroke_at is not None]
+        print(f"{f'{k * BIN_DEG}-{(k + 1) * BIN_DEG}':>17} {len(group):>8} {mean('score'):>6.2f} "
+              f"{math.degrees(mean('start_error')):>8.1f}dg {math.degrees(mean('smallest_error')):>12.1f}dg "
+              f"{np.median([r.smallest_at for r in group]):>16.0f} {math.degrees(mean('error_at_step')):>9.1f}dg "
+              f"{math.degrees(mean('end_error')):>7.1f}dg {100 * mean('end_position'):>16.2f} {mean('solved_steps'):>12.1f} "
+              f"{mean('strokes'):>7.2f} {(f'{np.median(second):.0f}' if second else '-'):>6}")
 
 
 def main() -> None:
@@ -44,34 +127,10 @@ def main() -> None:
         parser.error(f"{args.policy}: a {choice.task} policy; this script reads die episodes")
     policy = load_policy(ref, choice.task)
     env = make_env(choice)
-    rows = []
-    for episode in range(args.episodes):
-        obs, _ = env.reset(seed=args.seed + episode)
-        start_error = float(np.linalg.norm(obs[60:63]))
-        errors, state, start = [start_error], None, True
-        while True:
-            action, state = policy.act(obs, state, start)
-            start = False
-            obs, _, terminated, truncated, info = env.step(action)
-            errors.append(-info["rot_dist"])
-            if terminated or truncated:
-                break
-        result = info["episode_result"]
-        rows.append((start_error, min(errors), -info["rot_dist"], -info["pos_dist"], result.solved_steps,
-                     result.dropped, result.score, int(np.argmin(errors)), errors[min(args.at_step, len(errors) - 1)]))
-    data = np.array(rows, dtype=float)
-    print(f"{len(rows)} episodes of {ref.label} on {choice.label}: score {data[:, 6].mean():.3f}, "
-          f"dropped {data[:, 5].mean():.0%}")
-    print(f"{'start error, deg':>17} {'episodes':>8} {'score':>6} {'mean start':>10} {'smallest error':>14} "
-          f"{'at step (median)':>16} {f'at step {args.at_step}':>11} {'end error':>9} {'end position, cm':>16} "
-          f"{'solved steps':>12}")
-    bins = np.floor(np.degrees(data[:, 0]) / BIN_DEG).astype(int)
-    for k in sorted(set(bins.tolist())):
-        group = data[bins == k]
-        print(f"{f'{k * BIN_DEG}-{(k + 1) * BIN_DEG}':>17} {len(group):>8} {group[:, 6].mean():>6.2f} "
-              f"{math.degrees(group[:, 0].mean()):>8.1f}dg {math.degrees(group[:, 1].mean()):>12.1f}dg "
-              f"{np.median(group[:, 7]):>16.0f} {math.degrees(group[:, 8].mean()):>9.1f}dg {math.degrees(group[:, 2].mean()):>7.1f}dg "
-              f"{100 * group[:, 3].mean():>16.2f} {group[:, 4].mean():>12.1f}")
+    rows = [turn_record(env, policy.act, args.seed + episode, args.at_step) for episode in range(args.episodes)]
+    print(f"{len(rows)} episodes of {ref.label} on {choice.label}: score {np.mean([r.score for r in rows]):.3f}, "
+          f"dropped {np.mean([r.dropped for r in rows]):.0%}")
+    print_turn_table(rows, args.at_step)
 
 
 if __name__ == "__main__":
