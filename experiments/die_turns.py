@@ -62,16 +62,10 @@ def strokes(errors: Sequence[float]) -> list[tuple[int, int]]:
         return []
     smooth = np.convolve(np.pad(series, 2, mode="edge"), np.ones(5) / 5, mode="valid")
     turning = np.flatnonzero(np.diff(smooth) < -STROKE_RATE) + 1
-    found, begin = [], None
-    for previous, step in zip(np.r_[-10**9, turning[:-1]], turning):
-        if begin is None or step - previous > STROKE_GAP + 1:
-            if begin is not None:
-                found.append((begin, end))
-            begin = step
-        end = step
-    if begin is not None:
-        found.append((begin, end))
-    return [(a, b) for a, b in found if smooth[max(a - 1, 0)] - smooth[b] >= STROKE_MIN]
+    if not len(turning):
+        return []
+    runs = np.split(turning, np.flatnonzero(np.diff(turning) > STROKE_GAP + 1) + 1)
+    return [(int(run[0]), int(run[-1])) for run in runs if smooth[max(run[0] - 1, 0)] - smooth[run[-1]] >= STROKE_MIN]
 
 
 def turn_record(env, act: Callable, seed: int, at_step: int) -> TurnRecord:
