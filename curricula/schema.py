@@ -21,7 +21,7 @@ from myo_sds.curricula.run_settings import (
     RolloutConfig,
     RunSettings,
 )
-from myo_sds.curricula.yaml_reader import ConfigError, YamlReader
+from myo_sds.curricula.yaml_reader import PATH_KEYS, ConfigError, YamlReader, load_yaml, merge_bases
 from myo_sds.envs.declare import integer, number, one_of, optional, overrides_of, read_settings, setting, text
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
@@ -327,16 +327,31 @@ RUN_KEYS = ("curriculum", *(f.name for f in fields(RunSettings)), "policy", "ppo
 def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunConfig:
     """Read a run config (and ``--set key=value`` overrides), including its curriculum.
 
+    ``path`` may also be a curriculum file: it then runs with the bundled run config of the
+    bundled curriculum it is (or is based on), e.g. a variant of ``curricula/quickstart.yaml``
+    with ``configs/quickstart.yaml`` (:func:`run_config_for_curriculum`). A path given with
+    ``--set`` (``curriculum``, ``init_from``) is relative to the working folder; one written in a
+    file, to that file.
+
     Raises:
         ConfigError: for a missing file, bad YAML, or any bad key or value.
     """
     path = Path(path)
+    curriculum_file = None
+    if _is_curriculum_file(path):
+        curriculum_file, path = path.resolve(), run_config_for_curriculum(path)
     reader = YamlReader(path)
     raw = dict(reader.mapping("", reader.read_with_bases("run config"), RUN_KEYS))
+    if curriculum_file is not None:
+        raw["curriculum"] = str(curriculum_file)
+        reader.origins["curriculum"] = curriculum_file
     curriculum_overrides = tuple(a for a in overrides if a.split(".", 1)[0].split("=", 1)[0] in CURRICULUM_SET_KEYS)
     for assignment in overrides:
         if assignment not in curriculum_overrides:
             reader.set_value(raw, assignment, RUN_KEYS + CURRICULUM_SET_KEYS)
+            key = assignment.split("=", 1)[0].strip()
+            if key in PATH_KEYS and isinstance(raw.get(key), str):  # from the working folder, as a shell path
+                raw[key] = str(Path(raw[key]).resolve())
     reader.mapping("", raw, RUN_KEYS)
     if "curriculum" not in raw:
         raise reader.error("curriculum", "missing: the curriculum file this run follows")
@@ -359,6 +374,42 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     if cut and not config.policy.fast_lstm_update:
         raise reader.error("ppo.sequence_length", "needs policy.fast_lstm_update: true (the fast update's buffer cuts them)")
     return config
+
+
+def _is_curriculum_file(path: Path) -> bool:
+    """Whether ``path`` (a YAML file, bases merged) is a curriculum rather than a run config."""
+    try:
+        merged, _ = merge_bases(path, "run config")
+    except ConfigError:  # a missing or broken file: reading it as a run config says what is wrong
+        return False
+    return "curriculum" not in merged and bool({"stages", "task", "defaults"} & set(merged))
+
+
+def run_config_for_curriculum(path: Path) -> Path:
+    """The bundled run config a curriculum file runs with: the first file of its ``base:`` chain
+    (itself first) that a bundled config names as its curriculum (the config of the same name
+    preferred), else a ``ConfigError`` saying how to give it one."""
+    from myo_sds import bundled_dir
+
+    configs = sorted(bundled_dir("configs").glob("*.yaml"))
+    following: dict[Path, list[Path]] = {}
+    for config in configs:
+        merged, _ = merge_bases(config, "run config")
+        if isinstance(merged.get("curriculum"), str):
+            named = Path(merged["curriculum"])
+            named = named if named.is_absolute() else (config.parent / named)
+            following.setdefault(named.resolve(), []).append(config)
+    chain, current = [], path.resolve()
+    while current is not None and current not in chain:
+        chain.append(current)
+        base = (load_yaml(current, "curriculum") or {}).get("base")
+        current = (current.parent / base).resolve() if isinstance(base, str) else None
+    for file in chain:
+        if file in following:
+            return next((c for c in following[file] if c.stem == file.stem), following[file][0])
+    raise ConfigError(f"{path}: a curriculum that no bundled run config follows (nor any of its bases); give it "
+                      f"one: --config baoding_sds --set curriculum={path.resolve()} (a bundled config by name, or "
+                      f"your own run config's path)")
 
 
 def _run_settings(reader: YamlReader, raw: Mapping[str, Any], path: Path) -> dict[str, Any]:

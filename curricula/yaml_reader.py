@@ -154,18 +154,29 @@ PATH_KEYS = ("curriculum", "init_from")  # run-config values that are paths
 PLACEMENT = ("after", "before")  # where a stage added by name goes (a curriculum's stage mapping)
 
 
-def merge_stages(base: Any, over: Any, path: Path) -> list[Any]:
+def merge_stages(base: Any, over: Any, path: Path, replace: bool = False, base_path: Path | None = None) -> list[Any]:
     """A curriculum variant's ``stages`` over its base's.
 
     A list is the whole stage order: a listed stage named like a base stage is merged over it
-    (key by key, so a partial stage keeps the base stage's other settings), others stand alone,
-    and base stages left out are dropped. A mapping changes stages by name and keeps the rest:
+    (key by key, so a partial stage keeps the base stage's other settings), others stand alone.
+    A list that leaves out base stages is an error naming them, unless the variant says
+    ``replace_stages: true`` (then they are dropped). A mapping changes stages by name and keeps the rest:
     ``NAME: {advance: {threshold: 0.7}}`` merges into that stage, ``NAME: null`` removes it, and a
     new name adds a stage placed with ``after: OTHER`` or ``before: OTHER``; an existing stage
     moves the same way."""
     base = list(base) if isinstance(base, list) else []
     by_name = {stage["name"]: stage for stage in base if isinstance(stage, Mapping) and "name" in stage}
     if isinstance(over, list):
+        listed = {stage.get("name") for stage in over if isinstance(stage, Mapping)}
+        left_out = [name for name in by_name if name not in listed]
+        if left_out and not replace:
+            first = next((stage for stage in over if isinstance(stage, Mapping) and stage.get("name")), None)
+            changed = ", ".join(f"{k}: ..." for k in first if k != "name") if first else ""
+            example = f"{first['name']}: {{{changed or 'advance: ...'}}}" if first else f"{left_out[0]}: null"
+            raise ConfigError(
+                f"{path}: stages: this list leaves out {', '.join(left_out)} of its base {base_path or 'file'} (a list is "
+                f"the whole stage order); to change stages by name and keep the others, write a mapping "
+                f"(stages: {{{example}}}), or add replace_stages: true to drop them on purpose")
         return [_deep_merge(by_name[stage["name"]], stage)
                 if isinstance(stage, Mapping) and stage.get("name") in by_name else stage for stage in over]
     if not isinstance(over, Mapping):
@@ -224,7 +235,12 @@ def merge_bases(path: Path, what: str, _seen: tuple[Path, ...] = ()) -> tuple[di
         if isinstance(raw.get(key), str) and not Path(raw[key]).is_absolute():
             raw[key] = str((path.parent / raw[key]).resolve()) if _seen else raw[key]
     base = raw.pop("base", None)
+    replace = raw.pop("replace_stages", False)
+    if replace not in (True, False):
+        raise ConfigError(f"{path}: replace_stages: expected true or false, got {replace!r}")
     if base is None:
+        if replace:
+            raise ConfigError(f"{path}: replace_stages: only a variant (a file with base:) replaces stages")
         return raw, {}
     if not isinstance(base, str) or not base:
         raise ConfigError(f"{path}: base: expected the path of another {what} file, got {base!r}")
@@ -239,7 +255,7 @@ def merge_bases(path: Path, what: str, _seen: tuple[Path, ...] = ()) -> tuple[di
                if not any(_related(key, mine) for mine in own)}
     merged = _deep_merge(parent, {k: v for k, v in raw.items() if k != "stages"})
     if "stages" in raw:
-        merged["stages"] = merge_stages(parent.get("stages"), raw["stages"], path)
+        merged["stages"] = merge_stages(parent.get("stages"), raw["stages"], path, replace, base_path)
     return merged, origins
 
 

@@ -47,8 +47,12 @@ def set_process_environment() -> None:
         _os.environ.setdefault(name, value)
 
 
+def bundled_dir(kind: str) -> _Path:
+    """The folder of the bundled ``configs`` or ``curricula`` (inside a wheel, or a checkout's top)."""
+    return _PACKAGE / kind if (_PACKAGE / kind).is_dir() else _PACKAGE.parent / kind
+
+
 def bundled_path(kind: str, name: str) -> _Path | None:
     """The bundled ``configs`` or ``curricula`` YAML called ``name`` (with or without .yaml)."""
-    base = _PACKAGE / kind if (_PACKAGE / kind).is_dir() else _PACKAGE.parent / kind
-    path = base / (name if name.endswith((".yaml", ".yml")) else f"{name}.yaml")
+    path = bundled_dir(kind) / (name if name.endswith((".yaml", ".yml")) else f"{name}.yaml")
     return path if path.is_file() else None

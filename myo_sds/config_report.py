@@ -65,6 +65,9 @@ def config_rows(config: RunConfig) -> list[tuple[str, str, str]]:
     curriculum = config.curriculum
     c_origins = dict(curriculum.origins)
     knobs_class = TASK_SPECS[curriculum.task].knobs
+    # The stage order, resolved (a variant's changes and its bases merged): what the run goes through.
+    stage_origins = " + ".join(dict.fromkeys(o for k, o in c_origins.items() if k.startswith("stages.")))
+    rows.append(("stages", ", ".join(stage.name for stage in curriculum.stages), stage_origins or str(curriculum.path)))
     if curriculum.probe is not None:
         rows += _rows("probe.", curriculum.probe, c_origins)
     for stage in curriculum.stages:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -85,8 +86,10 @@ def test_a_curriculum_inherits_its_base_defaults_key_by_key_and_its_stages_unles
         assert dict(mine.distribution.reward_weights) == {**theirs.distribution.reward_weights, "solved": 2.0}
         assert dict(theirs.distribution.reward_weights)["solved"] == 5.0
         assert mine.distribution.solved_radius == theirs.distribution.solved_radius
-    # Stages written in the variant replace the base's list; a bad value the base wrote names the base.
-    one = load_curriculum(write(tmp_path, "base: tiny.yaml\nstages:\n  - name: only\n", "one_stage.yaml"))
+    # Stages written in the variant replace the base's list when it says so; a bad value the base
+    # wrote names the base.
+    one = load_curriculum(write(tmp_path, "base: tiny.yaml\nreplace_stages: true\nstages:\n  - name: only\n",
+                                "one_stage.yaml"))
     assert [s.name for s in one.stages] == ["only"] and one.task == "baoding"
     write(tmp_path, GOOD_CURRICULUM.replace("solved_radius: 0.03", "solved_radius: -1"), "bad_base.yaml")
     with pytest.raises(ConfigError, match=re.escape(f"{(tmp_path / 'bad_base.yaml').resolve()}: stage 1")):
@@ -209,7 +212,7 @@ def test_set_overrides_are_checked_against_the_schema(tmp_path):
         load_run_config(path, ("ppo.lerning_rate=1e-4",))
     assert str(error.value) == ("--set ppo.lerning_rate=1e-4: ppo.lerning_rate: unknown key (did you mean "
                                 "'learning_rate'?); allowed: learning_rate, n_steps, batch_size, n_epochs, gamma, "
-                                "gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm, target_kl, warmup")
+                                "gae_lambda, clip_range, ent_coef, vf_coef, max_grad_norm, target_kl, sequence_length, warmup")
     with pytest.raises(ConfigError, match=r"^--set n_env=2: n_env: unknown key \(did you mean 'n_envs'\?\)"):
         load_run_config(path, ("n_env=2",))
     with pytest.raises(ConfigError, match=r"^--set ppo.gamma=2: ppo.gamma: must be <= 1, got 2"):
@@ -325,10 +328,20 @@ def test_a_variant_changes_one_stage_by_name_and_keeps_the_rest(tmp_path):
     assert [s.name for s in load_curriculum(more).stages] == ["c", "b", "a"]
     fewer = write(tmp_path, "base: base.yaml\nstages:\n  a: null\n", "fewer.yaml")
     assert [s.name for s in load_curriculum(fewer).stages] == ["b"]
-    # A list is the whole stage order; a listed stage named like a base stage keeps its other settings.
+    # A list is the whole stage order: one that leaves out base stages names them and says how to
+    # keep them, unless it says it replaces the order; a listed stage keeps its other settings.
     listed = write(tmp_path, "base: base.yaml\nstages:\n  - {name: b, advance: {threshold: 0.6}}\n", "listed.yaml")
+    with pytest.raises(ConfigError, match=r"listed.yaml: stages: this list leaves out a of its base .*base.yaml .*"
+                                          r"write a mapping \(stages: \{b: \{advance: \.\.\.\}\}\), or add "
+                                          r"replace_stages: true"):
+        load_curriculum(listed)
+    listed.write_text("replace_stages: true\n" + listed.read_text())
     (only,) = load_curriculum(listed).stages
     assert only.advance.threshold == 0.6 and only.advance.max_steps == 1000 and only.ppo == base_b.ppo
+    whole = write(tmp_path, "base: base.yaml\nstages:\n  - {name: b}\n  - {name: a}\n", "whole.yaml")
+    assert [s.name for s in load_curriculum(whole).stages] == ["b", "a"]  # every stage listed: a new order
+    with pytest.raises(ConfigError, match="replace_stages: only a variant"):
+        load_curriculum(write(tmp_path, "replace_stages: true\n" + GOOD_CURRICULUM, "nobase.yaml"))
     for text, message in (("  z: {advance: {threshold: 0.5}}", "stages.z: no base stage of that name; to add one"),
                           ("  z: null", "stages.z: null removes a stage, but the base has none"),
                           ("  c: {after: q, advance: {threshold: 0.5}}", "stages.c.after: no stage named 'q'"),
@@ -431,3 +444,26 @@ def test_a_bad_default_is_named_where_the_default_was_set_not_where_the_stage_wa
     own = write(tmp_path, "base: base.yaml\nstages:\n  a: {env: {rsi_probability: 2}}\n", "own.yaml")
     with pytest.raises(ConfigError, match=r"own.yaml: stage 1 \(a\) env: rsi_probability"):
         load_curriculum(own)
+
+
+def test_a_curriculum_file_runs_with_the_bundled_config_of_what_it_is_based_on(tmp_path, monkeypatch):
+    """``--config my_curriculum.yaml``: a variant of a bundled curriculum runs with that
+    curriculum's bundled run config; paths in a file are relative to it, a --set path to the
+    working folder; a curriculum nothing follows says how to run it."""
+    mine = tmp_path / "elsewhere" / "mine.yaml"
+    mine.parent.mkdir()
+    mine.write_text(f"base: {os.path.relpath(REPO / 'curricula' / 'quickstart.yaml', mine.parent)}\n"
+                    "stages:\n  p1-noise: {advance: {threshold: 0.07}}\n")
+    monkeypatch.chdir(tmp_path)
+    config = load_run_config(Path("elsewhere/mine.yaml"))
+    quickstart = load_run_config(REPO / "configs" / "quickstart.yaml")
+    assert config.curriculum_path == mine.resolve() and config.init_from == quickstart.init_from
+    assert (config.total_steps, config.ppo) == (quickstart.total_steps, quickstart.ppo)
+    assert [(s.name, s.advance.threshold) for s in config.curriculum.stages] == [("p1-noise", 0.07), ("p1-noise-better", 0.3)]
+    # --set curriculum= is a path from the working folder, not from the config's folder.
+    config = load_run_config(REPO / "configs" / "quickstart.yaml", ("curriculum=elsewhere/mine.yaml",))
+    assert config.curriculum_path == mine.resolve()
+    alone = write(tmp_path, GOOD_CURRICULUM, "alone.yaml")
+    with pytest.raises(ConfigError, match=r"alone.yaml: a curriculum that no bundled run config follows .*"
+                                          r"--config baoding_sds --set curriculum=.*alone.yaml"):
+        load_run_config(alone)

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from myo_sds import bundled_path, set_process_environment
-from myo_sds.cli import sigint_held
+from myo_sds.cli import sigint_held, train_command
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -140,7 +140,7 @@ def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool,
         print(f"error: {error}", file=sys.stderr)
         return 2
     if resumable:
-        print(f"wrote {target.path}: continue with `python train.py --resume {target.path}` "
+        print(f"wrote {target.path}: continue with `{train_command()} --resume {target.path}` "
               "(copy it out of a source tree first: a resumed run writes its logs there)")
     else:
         print(f"wrote {target.path}: {', '.join(sorted(p.name for p in target.path.iterdir()))}")
@@ -150,13 +150,13 @@ def export(run_dir: Path, destination: Path, steps: int | None, resumable: bool,
 def _left_behind(trainer, args) -> str:
     """What an interrupted start or resume leaves: a new run without a checkpoint is removed."""
     if args is not None and args.resume:
-        return f"the run is as its last checkpoint left it; continue with `python train.py --resume {args.resume}`"
+        return f"the run is as its last checkpoint left it; continue with `{train_command()} --resume {args.resume}`"
     if trainer is None:
         return "before the first step; no run folder was kept"
     if trainer.folder.latest_checkpoint() is None:
         trainer.folder.remove()
         return "before the first checkpoint; no run folder was kept"
-    return f"continue with `python train.py --resume {trainer.run_dir}`"
+    return f"continue with `{train_command()} --resume {trainer.run_dir}`"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import yaml
 
+from myo_sds.cli import train_command
 from myo_sds.curricula.advancement import (
     Decision,
     decide,
@@ -223,7 +224,7 @@ class CurriculumTrainer:
                 if max_wall_s is not None and state.wall_s - start_wall >= max_wall_s:
                     state.status = RunStatus.TIME_LIMIT
                     self.progress_bar.write(f"time limit of {max_wall_s:.0f} s reached; continue with "
-                                            f"`python train.py --resume {self.run_dir}`")
+                                            f"`{train_command()} --resume {self.run_dir}`")
                     break
                 self.apply_ppo_settings()  # a decaying rate or a warm-up's end acts between rollouts
                 try:
@@ -235,13 +236,13 @@ class CurriculumTrainer:
                 except WorkerLost as error:
                     state.status = RunStatus.INTERRUPTED
                     self.progress_bar.write(f"{error}; saving a checkpoint; continue with "
-                                            f"`python train.py --resume {self.run_dir}`")
+                                            f"`{train_command()} --resume {self.run_dir}`")
                     break
                 self._after_rollout()
                 if episode_callback.stop_requested:
                     state.status = RunStatus.INTERRUPTED
                     self.progress_bar.write(f"{episode_callback.stop_requested}: saving a checkpoint; continue with "
-                                            f"`python train.py --resume {self.run_dir}`")
+                                            f"`{train_command()} --resume {self.run_dir}`")
                     break
                 rule = self.stage.advance
                 self.progress_bar.describe(measured_value(rule, state) if rule else state.measured, self._rule_text(),
