@@ -1,6 +1,10 @@
 # Two entry points: `make demo` (set up, train the quickstart curriculum, evaluate it) and
 # `make test` (set up, run the test suite). Both create .venv on first use.
 PYTHON ?= python3
+# Where pip looks for PyTorch first (empty: its own indexes). On plain PyPI torch 2.13.0 is the
+# CUDA build (2.7 GB with its nvidia packages); TORCH_INDEX=https://download.pytorch.org/whl/cpu
+# takes the CPU build (192 MB).
+TORCH_INDEX ?=
 VENV := .venv
 PY := $(VENV)/bin/python
 RUN_DIR := runs/quickstart
@@ -11,8 +15,8 @@ RUN_DIR := runs/quickstart
 $(VENV)/.installed-run: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	# CPU torch first, so no dependency can pull a multi-GB CUDA build.
-	$(PY) -m pip install --quiet torch==2.13.0
+	# torch first, pinned: no dependency then pulls another build of it.
+	$(PY) -m pip install --quiet torch==2.13.0 $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX))
 	$(PY) -m pip install --quiet -e .
 	touch $@
 

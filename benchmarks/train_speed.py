@@ -10,7 +10,8 @@
   network, PPO settings and number of envs, one SubprocVecEnv process per env, as the 2022
   phase-1 policy was trained);
 - ours: ``train.py``'s default Baoding config, on its first curriculum stage;
-- ceiling: bare ``mj_step`` physics (10 substeps per env step) in one process per core.
+- ceiling: bare ``mj_step`` physics of the config's task (its substeps per env step: Baoding 10,
+  the die 5) in one process per core.
 
 Each training run is timed after a first warm-up rollout; wall time is split into env
 stepping, policy inference (rest of the rollout) and the PPO update.
@@ -117,18 +118,19 @@ def run_ours(steps: int, config: Path, overrides: tuple[str, ...] = ()) -> dict[
             "inference_and_other_share": 1 - (env + update) / wall}
 
 
-def _bare_worker(seconds: float) -> float:
+def _bare_worker(seconds: float, task: str = "baoding") -> float:
     import mujoco
 
-    from myo_sds.envs.baoding import FRAME_SKIP, BaodingEnv
+    from myo_sds.envs.task_specs import TASK_SPECS
 
-    env = BaodingEnv()
+    env = TASK_SPECS[task].env_class()()
     model, data = env.model, mujoco.MjData(env.model)
+    frame_skip = env.FRAME_SKIP
     rng = np.random.default_rng(os.getpid())
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < seconds:
         data.ctrl[:] = rng.uniform(0, 1, model.nu)
-        mujoco.mj_step(model, data, FRAME_SKIP)
+        mujoco.mj_step(model, data, frame_skip)
         steps += 1
         if steps % 30 == 0:  # episodes of about the length random actions give
             mujoco.mj_resetData(model, data)
@@ -136,10 +138,10 @@ def _bare_worker(seconds: float) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def run_ceiling(cores: int, seconds: float = 10.0) -> dict[str, float]:
+def run_ceiling(cores: int, seconds: float = 10.0, task: str = "baoding") -> dict[str, float]:
     with multiprocessing.get_context("spawn").Pool(cores) as pool:
-        rates = pool.map(_bare_worker, [seconds] * cores)
-    return {"steps_per_s": float(sum(rates)), "processes": cores}
+        rates = pool.starmap(_bare_worker, [(seconds, task)] * cores)
+    return {"steps_per_s": float(sum(rates)), "processes": cores, "task": task}
 
 
 def main() -> None:
@@ -155,8 +157,12 @@ def main() -> None:
     args = parser.parse_args()
     cores = os.cpu_count() or 1
     results: dict[str, dict] = {"machine": {"cores": cores}}
-    results["ceiling"] = run_ceiling(cores)
-    print(f"ceiling   (bare mj_step, {cores} processes): {results['ceiling']['steps_per_s']:7.0f} env steps/s", flush=True)
+    from myo_sds.curricula.schema import load_run_config
+
+    task = load_run_config(args.config, tuple(args.overrides)).curriculum.task
+    results["ceiling"] = run_ceiling(cores, task=task)
+    print(f"ceiling   (bare mj_step, {task}, {cores} processes): {results['ceiling']['steps_per_s']:7.0f} env steps/s",
+          flush=True)
     results["ours"] = run_ours(args.steps, args.config, tuple(args.overrides))
     results["ours"]["overrides"] = args.overrides
     print(f"ours      ({args.config.name}): {results['ours']['steps_per_s']:7.0f} env steps/s", flush=True)
