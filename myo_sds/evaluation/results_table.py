@@ -25,7 +25,7 @@ COLUMNS = (("p1_2022", 0.0), ("p1_2022", 0.02), ("p1", 0.0), ("p1", 0.02))
 
 def _cell(report: dict) -> str:
     low, high = report["score_ci95"]
-    interval = "" if report["episodes"] < 2 or low == high else f" [{low:.3f}, {high:.3f}]"
+    interval = f" [{low:.3f}, {high:.3f}]" if f"{low:.3f}" != f"{high:.3f}" else ""  # none: one episode replayed
     return f"{report['score']:.3f}{interval}, {report['drop_rate']:.0%} dropped"
 
 
