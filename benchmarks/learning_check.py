@@ -54,7 +54,7 @@ FIRST_STAGE_RULE = {"metric": "score", "threshold": 0.6, "window": 200}
 def first_stage_curriculum(config: Path, folder: Path) -> Path:
     """A copy of the config's curriculum reduced to its first stage, without evaluations (an
     evaluation-gated stage passed at FIRST_STAGE_RULE)."""
-    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.curricula.run_config import load_run_config
 
     run = load_run_config(config)
     raw = yaml.safe_load(run.curriculum_path.read_text())
@@ -89,7 +89,7 @@ def train(config: Path, seed: int, budget: int, folder: Path, max_wall_s: float 
           overrides: tuple[str, ...] = (), setup: str | None = None) -> dict:
     """Train (or continue, or only read) the run ``folder/<setup>_s<seed>`` up to ``budget``
     env steps and ``max_wall_s`` seconds of training in all, and return its result."""
-    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.curricula.run_config import load_run_config
     from myo_sds.curricula.state import RunStatus
     from myo_sds.run_folder import RunFolder
     from myo_sds.training import CurriculumTrainer

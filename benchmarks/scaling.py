@@ -30,7 +30,7 @@ sys.path.insert(0, str(REPO))
 
 def timed_run(config: Path, overrides: tuple[str, ...], steps: int) -> dict[str, float]:
     """A training of ``steps`` env steps after one untimed rollout; env steps/s and its split."""
-    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.curricula.run_config import load_run_config
     from myo_sds.training import CurriculumTrainer
 
     base = load_run_config(config, overrides)

@@ -76,7 +76,7 @@ def run_reference(steps: int, n_envs: int, config: Path | None = None) -> dict[s
 
     policy, ppo = PolicyConfig(), PpoConfig()
     if config is not None:
-        from myo_sds.curricula.schema import load_run_config
+        from myo_sds.curricula.run_config import load_run_config
 
         run = load_run_config(config)
         policy, ppo, n_envs = run.policy, run.ppo, run.n_envs
@@ -99,7 +99,7 @@ def run_reference(steps: int, n_envs: int, config: Path | None = None) -> dict[s
 
 def run_ours(steps: int, config: Path, overrides: tuple[str, ...] = ()) -> dict[str, float]:
     """``train.py``'s own loop on ``config``; the first rollout (warm-up) is not counted."""
-    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.curricula.run_config import load_run_config
     from myo_sds.training import CurriculumTrainer
 
     base = load_run_config(config, overrides)
@@ -157,7 +157,7 @@ def main() -> None:
     args = parser.parse_args()
     cores = os.cpu_count() or 1
     results: dict[str, dict] = {"machine": {"cores": cores}}
-    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.curricula.run_config import load_run_config
 
     task = load_run_config(args.config, tuple(args.overrides)).curriculum.task
     results["ceiling"] = run_ceiling(cores, task=task)

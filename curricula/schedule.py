@@ -12,8 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from myo_sds.curricula.run_config import RunConfig
 from myo_sds.curricula.run_settings import STAGE_PPO_SETTINGS, LearningRateDecay
-from myo_sds.curricula.schema import RunConfig
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ import math
 from collections import Counter
 from pathlib import Path
 
-from myo_sds.curricula.schema import load_run_config
+from myo_sds.curricula.run_config import load_run_config
 from myo_sds.run_folder import RunFolder
 
 CONTROL_DT = 0.025  # s per env step of the Baoding env (2.5 ms x 10 substeps; BaodingEnv().dt)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import fields, is_dataclass
 from typing import Any
 
-from myo_sds.curricula.schema import RunConfig
+from myo_sds.curricula.run_config import RunConfig
 from myo_sds.envs.declare import UNSET
 from myo_sds.envs.task_specs import TASK_SPECS
 

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from myo_sds.curricula.run_config import load_run_config
 from myo_sds.curricula.run_settings import LearningRateDecay, PpoWarmup
-from myo_sds.curricula.schema import ConfigError, load_curriculum, load_run_config
+from myo_sds.curricula.schema import ConfigError, load_curriculum
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -290,7 +291,7 @@ def test_a_stage_changes_epochs_and_target_kl_until_a_later_stage_does(tmp_path)
 def test_every_setting_is_declared_one_way_with_a_parser_and_a_meaning():
     from dataclasses import fields
 
-    from myo_sds.curricula import run_settings, schema
+    from myo_sds.curricula import run_config, run_settings, schema
     from myo_sds.envs.baoding_task import BaodingKnobs
     from myo_sds.envs.die_task import DieKnobs
     from myo_sds.envs.knobs import RecordedStart
@@ -304,7 +305,7 @@ def test_every_setting_is_declared_one_way_with_a_parser_and_a_meaning():
             assert callable(field.metadata.get("parse")), f"{cls.__name__}.{field.name}"
             assert field.metadata.get("help"), f"{cls.__name__}.{field.name}"
     # The run config's top level is read through them too: a bad value names the file and key.
-    assert set(schema.RUN_KEYS) >= {f.name for f in fields(run_settings.RunSettings)}
+    assert set(run_config.RUN_KEYS) >= {f.name for f in fields(run_settings.RunSettings)}
 
 
 def test_a_variant_changes_one_stage_by_name_and_keeps_the_rest(tmp_path):

@@ -187,7 +187,8 @@ def _main(args: argparse.Namespace, started: list) -> int:
     if args.export:
         return export(args.export, args.to, args.load_checkpoint, args.resumable, args.best)
     with sigint_held():  # NumPy (the config's), MuJoCo and torch load here
-        from myo_sds.curricula.schema import ConfigError, load_run_config
+        from myo_sds.curricula.run_config import load_run_config
+        from myo_sds.curricula.schema import ConfigError
         from myo_sds.run_folder import RunFolder
 
         try:

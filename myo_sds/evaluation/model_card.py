@@ -73,7 +73,7 @@ def _scores(folder: RunFolder) -> list[str]:
 def _fine_tune_line(folder: RunFolder, model_dir: Path) -> str:
     """The fine-tuning command; a policy trained with a privileged critic keeps it (the new
     config must feed its critic the same extra inputs)."""
-    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.curricula.run_config import load_run_config
 
     extra = load_run_config(folder.config_file).policy.critic_extra if folder.config_file.is_file() else ()
     keep = f' --set "policy.critic_extra=[{", ".join(extra)}]"' if extra else ""

@@ -137,7 +137,7 @@ def summarize(run_dir: str | Path) -> RunSummary:
 def before_first_checkpoint(run_dir: str | Path) -> str | None:
     """What ``--status`` says of a run that has no checkpoint yet (nothing to summarize): when the
     first comes and what its episode log shows so far. None for a folder with a checkpoint."""
-    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.curricula.run_config import load_run_config
 
     folder = RunFolder(run_dir)
     if not folder.path.is_dir() or folder.read_state() is not None or not folder.config_file.is_file():

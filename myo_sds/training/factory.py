@@ -9,8 +9,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from myo_sds.curricula.run_config import RunConfig
 from myo_sds.curricula.schedule import PpoSettings
-from myo_sds.curricula.schema import RunConfig, Stage
+from myo_sds.curricula.schema import Stage
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.sb3_internals import resize_rollout_buffer
@@ -201,7 +202,7 @@ def _input_size(weights: dict, lstm: str) -> int | None:
 
 def _trained_critic_extra(model_file: Path) -> str:
     """The ``policy.critic_extra`` of the run or model folder holding ``model_file``, as YAML."""
-    from myo_sds.curricula.schema import load_run_config
+    from myo_sds.curricula.run_config import load_run_config
     from myo_sds.run_folder import RunFolder
 
     run = RunFolder.containing(model_file)

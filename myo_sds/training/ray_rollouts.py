@@ -22,8 +22,9 @@ from typing import Any
 
 import numpy as np
 
+from myo_sds.curricula.run_config import RunConfig
 from myo_sds.curricula.schedule import PpoSettings
-from myo_sds.curricula.schema import ConfigError, RunConfig
+from myo_sds.curricula.schema import ConfigError
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.training.rollout import WorkerLost
 from myo_sds.training.rollout_worker import BUFFER_FIELDS, Moments, RolloutResult, RolloutWorker

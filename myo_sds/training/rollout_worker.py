@@ -19,8 +19,8 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import Logger
 
+from myo_sds.curricula.run_config import RunConfig
 from myo_sds.curricula.schedule import PpoSettings
-from myo_sds.curricula.schema import RunConfig
 from myo_sds.envs.knobs import TaskKnobs
 from myo_sds.envs.metrics import EpisodeResult
 from myo_sds.sb3_internals import drop_queued_seeds, prepare_rollout

@@ -23,14 +23,9 @@ from myo_sds.curricula.advancement import (
     episode_metric,
     measured_value,
 )
+from myo_sds.curricula.run_config import RunConfig, load_run_config
 from myo_sds.curricula.schedule import ppo_settings_at
-from myo_sds.curricula.schema import (
-    ConfigError,
-    RunConfig,
-    Stage,
-    load_run_config,
-    stage_label,
-)
+from myo_sds.curricula.schema import ConfigError, Stage, stage_label
 from myo_sds.curricula.state import CurriculumState, RunStatus
 from myo_sds.envs.task_specs import TASK_SPECS
 from myo_sds.run_folder import EpisodeRecord, RunFolder
