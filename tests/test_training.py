@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -730,3 +731,38 @@ def test_status_before_the_first_checkpoint_shows_the_episode_log_so_far(tmp_pat
                 "median solved steps 3")
     assert capsys.readouterr().out == expected + "\n"
     assert json.loads((tmp_path / "status.json").read_text())["message"] == expected
+
+
+@pytest.mark.slow
+def test_a_python_without_the_package_is_told_in_one_line_which_to_use_and_that_command_works(tmp_path):
+    """train.py / evaluate.py run by an interpreter that cannot import what they need (here this
+    one without its site-packages) print one line naming the checkout's environment, and the
+    command printed there runs as printed."""
+    import shlex
+
+    for script in ("train.py", "evaluate.py"):
+        args = ["--config", "quickstart", "--print-config"] if script == "train.py" else ["models/die_p1", "--episodes",
+                                                                                            "1", "--env", "p1"]
+        done = subprocess.run([sys.executable, "-S", script, *args], cwd=REPO, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 2, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and "cannot import" in lines[0] and "Traceback" not in done.stderr, done.stderr
+        command = lines[0].split("run it with the checkout's environment: ", 1)[1]
+        assert command.startswith(".venv/bin/python " + script), command
+        again = subprocess.run(shlex.split(command), cwd=REPO, capture_output=True, text=True, timeout=600)
+        assert again.returncode == 0, again.stderr
+
+
+def test_a_hint_to_resume_names_the_command_as_it_was_run(monkeypatch):
+    from myo_sds.cli import train_command
+
+    monkeypatch.setattr(sys, "argv", ["/usr/local/bin/myo-sds-train", "--config", "x"])
+    assert train_command() == "myo-sds-train"
+    monkeypatch.setattr(sys, "argv", ["train.py", "--config", "x"])
+    monkeypatch.chdir(REPO)
+    python = os.path.relpath(sys.executable) if os.path.abspath(sys.executable).startswith(str(REPO) + os.sep) \
+        else sys.executable
+    assert train_command() in (f"{python} train.py", "python train.py")
+    # The printed command runs: the interpreter it names is this one.
+    program = train_command().split()[0]
+    assert os.path.realpath(shutil.which(program) or program) == os.path.realpath(sys.executable)
