@@ -33,6 +33,7 @@ feed-forward actor and critic in the same training and evaluation code.
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -140,8 +141,6 @@ class LatticeLstmPolicy(SequenceLstmPolicy):
 
     def __init__(self, observation_space, action_space, lr_schedule, *args, lattice_alpha: float = 1.0,
                  lattice_std_reg: float = 0.0, lattice_std_clip: tuple[float, float] = (1e-3, 10.0), **kwargs):
-        import math
-
         from stable_baselines3.common.preprocessing import get_action_dim
 
         from myo_sds.lattice import LatticeNoise
