@@ -18,13 +18,14 @@ from myo_sds.curricula.run_settings import (
     RunSettings,
 )
 from myo_sds.curricula.schema import (
+    CURRICULUM_KEYS,
     CURRICULUM_SET_KEYS,
     Curriculum,
     _flat_keys,
     load_curriculum,
     stage_label,
 )
-from myo_sds.curricula.yaml_reader import PATH_KEYS, ConfigError, YamlReader, load_yaml, merge_bases
+from myo_sds.curricula.yaml_reader import PATH_KEYS, ConfigError, YamlReader, load_yaml, merge_bases, resolve_base
 from myo_sds.envs.declare import read_settings, text
 from myo_sds.envs.task_specs import TASK_SPECS
 
@@ -110,13 +111,24 @@ def load_run_config(path: str | Path, overrides: tuple[str, ...] = ()) -> RunCon
     return config
 
 
-def _is_curriculum_file(path: Path) -> bool:
-    """Whether ``path`` (a YAML file, bases merged) is a curriculum rather than a run config."""
+def _is_curriculum_file(path: Path, _seen: frozenset[Path] = frozenset()) -> bool:
+    """Whether ``path`` is a curriculum rather than a run config, by its own keys (or, a file of
+    only ``base:``, by what its base is; a cycle of bases is reported when read as a run config)."""
     try:
-        merged, _ = merge_bases(path, "run config")
+        raw = load_yaml(path, "config")
     except ConfigError:  # a missing or broken file: reading it as a run config says what is wrong
         return False
-    return "curriculum" not in merged and bool({"stages", "task", "defaults"} & set(merged))
+    if not isinstance(raw, Mapping):
+        return False
+    keys = set(raw) - {"base", "replace_stages"}
+    if keys:
+        return "curriculum" not in keys and bool(keys & set(CURRICULUM_KEYS))
+    base = raw.get("base")
+    if not isinstance(base, str):
+        return False
+    as_curriculum = resolve_base(path, base, "curriculum")
+    seen = _seen | {path.resolve()}
+    return as_curriculum.is_file() and as_curriculum not in seen and _is_curriculum_file(as_curriculum, seen)
 
 
 def run_config_for_curriculum(path: Path) -> Path:
@@ -137,7 +149,7 @@ def run_config_for_curriculum(path: Path) -> Path:
     while current is not None and current not in chain:
         chain.append(current)
         base = (load_yaml(current, "curriculum") or {}).get("base")
-        current = (current.parent / base).resolve() if isinstance(base, str) else None
+        current = resolve_base(current, base, "curriculum") if isinstance(base, str) else None
     for file in chain:
         if file in following:
             return next((c for c in following[file] if c.stem == file.stem), following[file][0])

@@ -218,8 +218,20 @@ def merge_stages(base: Any, over: Any, path: Path, replace: bool = False, base_p
     return stages
 
 
+def resolve_base(path: Path, base: str, what: str) -> Path:
+    """The file ``base:`` names in ``path``: relative to ``path``'s folder, or, a bare name that is
+    no file there, the bundled curriculum (``what == "curriculum"``) or run config of that name."""
+    base_path = (path.parent / base).resolve()
+    if not base_path.is_file() and "/" not in base:
+        from myo_sds import bundled_path
+
+        base_path = bundled_path("curricula" if what == "curriculum" else "configs", base) or base_path
+    return base_path
+
+
 def merge_bases(path: Path, what: str, _seen: tuple[Path, ...] = ()) -> tuple[dict[str, Any], dict[str, Path]]:
-    """A YAML mapping with ``base: OTHER.yaml`` (relative to the file) read first and this file's
+    """A YAML mapping with ``base: OTHER.yaml`` (relative to the file; a bare name that is no file
+    there names a bundled curriculum or config, e.g. ``base: quickstart.yaml``) read first and this file's
     keys merged over it, mapping by mapping (a value that is not a mapping replaces the base's;
     a curriculum's ``stages`` merge by stage name, :func:`merge_stages`); bases may have bases. A
     relative ``curriculum`` path stays relative to the file that wrote it. Also returns, for each
@@ -244,7 +256,7 @@ def merge_bases(path: Path, what: str, _seen: tuple[Path, ...] = ()) -> tuple[di
         return raw, {}
     if not isinstance(base, str) or not base:
         raise ConfigError(f"{path}: base: expected the path of another {what} file, got {base!r}")
-    base_path = (path.parent / base).resolve()
+    base_path = resolve_base(path, base, what)
     if base_path in (*_seen, path):
         raise ConfigError(f"{path}: base: {base} leads back to {base_path} (a cycle of bases)")
     if not base_path.is_file():
